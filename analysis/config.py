@@ -1,0 +1,254 @@
+"""Load and check ``config.yaml``; derive the scene of one fidelity level in SI units.
+
+The configuration is checked twice: by its JSON Schema (types, ranges, unknown
+keys) and by :func:`check_config` (facts that relate two keys). Both raise
+:class:`ConfigError` with the dotted key and the offending value, before any
+simulation starts.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from math import erf, pi, sqrt
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import yaml
+
+SCHEMA_PATH = Path(__file__).with_name("schemas") / "config.schema.yaml"
+#: Solid fraction assumed when sizing the insertion region of the heap.
+INSERTION_SOLID_FRACTION = 0.2
+
+
+class ConfigError(ValueError):
+    """A configuration value is wrong; the message names its key and value."""
+
+
+def load_schema() -> dict:
+    return yaml.safe_load(SCHEMA_PATH.read_text())
+
+
+def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -> dict:
+    """Read (if a path), validate and return the configuration.
+
+    Parameters
+    ----------
+    source : path or dict
+        ``config.yaml`` or an already-parsed mapping (e.g. Snakemake's ``config``).
+    base_dir : path, optional
+        Folder that a relative ``substrate.stl`` is resolved against; defaults to
+        the config file's folder, or the working directory for a mapping.
+    """
+    if isinstance(source, (str, Path)):
+        path = Path(source)
+        if not path.is_file():
+            raise ConfigError(f"config file {str(path)!r} does not exist")
+        config = yaml.safe_load(path.read_text())
+        base_dir = path.parent if base_dir is None else base_dir
+    else:
+        config = copy.deepcopy(source)
+    validate_schema(config)
+    check_config(config, Path(base_dir or "."))
+    return config
+
+
+def validate_schema(config: dict) -> None:
+    """Raise :class:`ConfigError` on the first schema violation, naming key and value."""
+    validator = jsonschema.Draft202012Validator(load_schema())
+    errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
+    if errors:
+        error = errors[0]
+        key = ".".join(str(p) for p in error.absolute_path) or "<top level>"
+        raise ConfigError(f"config key {key!r}: {error.message} (value: {error.instance!r})")
+
+
+def _fail(key: str, value, why: str):
+    raise ConfigError(f"config key {key!r} = {value!r}: {why}")
+
+
+def check_config(config: dict, base_dir: Path = Path(".")) -> None:
+    """Cross-key checks the schema cannot express."""
+    level = config["level"]
+    if level not in config["fidelity"]:
+        _fail("level", level, f"no such fidelity level; choose one of {sorted(config['fidelity'])}")
+    psd = config["psd"]
+    if psd["min_diameter_um"] >= psd["max_diameter_um"]:
+        _fail("psd.min_diameter_um", psd["min_diameter_um"],
+              f"must be below psd.max_diameter_um = {psd['max_diameter_um']}")
+    if not psd["min_diameter_um"] <= psd["mean_diameter_um"] <= psd["max_diameter_um"]:
+        _fail("psd.mean_diameter_um", psd["mean_diameter_um"], "must lie between the min and max diameters")
+    gap = config["roller"]["gap_um"]
+    if gap < psd["min_diameter_um"]:
+        _fail("roller.gap_um", gap, f"is below the smallest particle diameter ({psd['min_diameter_um']} um)")
+    step = config["timestep"]
+    if step["rayleigh_fraction"] > step["max_rayleigh_fraction"]:
+        _fail("timestep.rayleigh_fraction", step["rayleigh_fraction"],
+              f"exceeds timestep.max_rayleigh_fraction = {step['max_rayleigh_fraction']}")
+    stl = config["substrate"]["stl"]
+    if stl is not None and not (base_dir / stl).is_file():
+        _fail("substrate.stl", stl, "file not found")
+    for name, lvl in config["fidelity"].items():
+        width = lvl.get("sampling_width_mm", lvl["strip_width_mm"])
+        if width > lvl["strip_width_mm"]:
+            _fail(f"fidelity.{name}.sampling_width_mm", width,
+                  f"exceeds the strip width {lvl['strip_width_mm']} mm")
+        if lvl["sampling_start_mm"] < lvl["heap_length_mm"]:
+            _fail(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
+                  f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")
+    if config["surrogate"]["n_test"] >= len(config["sweep"]["U_mm_s"]) * len(config["sweep"]["omega_rad_s"]):
+        _fail("surrogate.n_test", config["surrogate"]["n_test"], "leaves no run to train on")
+
+
+# --------------------------------------------------------------------------
+# Physics helpers (SI)
+
+def rayleigh_time(radius: float, density: float, youngs_modulus: float, poisson_ratio: float) -> float:
+    """Rayleigh time [s] of a sphere, as LIGGGHTS' ``check/timestep/gran`` computes it.
+
+    ``dt_R = pi r sqrt(rho / G) / (0.1631 nu + 0.8766)``, ``G = E / (2 (1 + nu))``.
+    """
+    shear_modulus = youngs_modulus / (2.0 * (1.0 + poisson_ratio))
+    return pi * radius * sqrt(density / shear_modulus) / (0.1631 * poisson_ratio + 0.8766)
+
+
+def psd_classes(mean: float, std: float, dmin: float, dmax: float, n: int):
+    """Discretise a clipped Gaussian number distribution of diameters.
+
+    The range ``[dmin, dmax]`` is cut into ``n`` classes of equal width. A class
+    is represented by the diameter whose cube is the class's mean ``d^3``
+    (so each class keeps its mass), and weighted by its mass fraction.
+
+    Returns
+    -------
+    diameters : ndarray (n,), same unit as the inputs
+    mass_fractions : ndarray (n,), summing to 1
+    """
+    edges = np.linspace(dmin, dmax, n + 1)
+    fine = np.linspace(dmin, dmax, 200 * n + 1)
+    pdf = np.exp(-0.5 * ((fine - mean) / std) ** 2)
+    which = np.clip(np.searchsorted(edges, fine, side="right") - 1, 0, n - 1)
+    number = np.bincount(which, weights=pdf, minlength=n)
+    third_moment = np.bincount(which, weights=pdf * fine**3, minlength=n)
+    diameters = np.cbrt(third_moment / number)
+    return diameters, third_moment / third_moment.sum()
+
+
+def is_prime(n: int) -> bool:
+    return n > 1 and all(n % k for k in range(2, int(n**0.5) + 1))
+
+
+def liggghts_seeds(base: int, count: int) -> list[int]:
+    """``count`` distinct primes > 10000 derived from ``base`` (LIGGGHTS' seeds)."""
+    seeds, n = [], 10007 + 1009 * base
+    while len(seeds) < count:
+        if is_prime(n):
+            seeds.append(n)
+        n += 1
+    return seeds
+
+
+def roller_motion(speed: float, omega: float, radius: float) -> dict:
+    """The LIGGGHTS moves of the roller for the paper's sign convention.
+
+    The roller travels along +x at ``speed`` [m/s] and turns about its axis
+    (along y) so that its bottom point moves at ``speed + omega * radius`` along
+    +x: positive ``omega`` [rad/s] counter-rotates, negative rolls forward.
+    A right-handed rotation about +y moves the bottom point along -x, so the
+    rotation axis is ``-sign(omega) * y``. ``rotate`` takes a period, so
+    ``omega = 0`` has no rotation at all.
+    """
+    motion = {"velocity": (speed, 0.0, 0.0), "rotate": None,
+              "bottom_speed": speed + omega * radius}
+    if omega != 0:
+        motion["rotate"] = {"axis": (0.0, -float(np.sign(omega)), 0.0), "period": 2 * pi / abs(omega)}
+    return motion
+
+
+# --------------------------------------------------------------------------
+# The scene of one fidelity level
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything a run needs, in SI units. Built by :func:`scene`."""
+    level: str
+    strip_width: float
+    heap: tuple            # (xlo, xhi, zlo, zhi) of the insertion block [m]
+    heap_particles: int
+    sampling_region: tuple  # (xmin, xmax, ymin, ymax) [m]
+    travel_end: float       # x of the roller axis when it stops [m]
+    roller_radius: float
+    roller_gap: float
+    roller_facets: int
+    diameters: tuple        # size-class diameters [m]
+    mass_fractions: tuple
+    density: float
+    youngs_modulus: float
+    poisson_ratio: float
+    restitution: float
+    friction_particle: float
+    friction_wall: float
+    rolling_friction: float
+    cohesion_energy_density: float
+    timestep: float
+    rayleigh_time: float
+    max_rayleigh_fraction: float
+    settle_time: float
+    rest_time: float
+    rest_speed: float       # RMS speed [m/s] below which particles are at rest
+    profilometer_lines: int
+    mpi_ranks: int
+    substrate: dict
+    substrate_x: tuple      # (xlo, xhi) the substrate must cover [m]
+    rough_x: tuple          # (xlo, xhi) where the substrate is rough (around the sampling region) [m]
+    box: tuple              # (xlo, xhi, ylo, yhi, zlo, zhi) of the simulation box [m]
+
+
+def scene(config: dict, level: str | None = None) -> Scene:
+    """Resolve fidelity level ``level`` (default ``config['level']``) into a :class:`Scene`."""
+    level = level or config["level"]
+    if level not in config["fidelity"]:
+        _fail("level", level, f"no such fidelity level; choose one of {sorted(config['fidelity'])}")
+    lvl, mat, psd, roller = config["fidelity"][level], config["material"], config["psd"], config["roller"]
+    mm, um = 1e-3, 1e-6
+    diameters, fractions = psd_classes(psd["mean_diameter_um"] * um, psd["std_diameter_um"] * um,
+                                       psd["min_diameter_um"] * um, psd["max_diameter_um"] * um,
+                                       lvl["size_classes"])
+    width = lvl["strip_width_mm"] * mm
+    heap_length = lvl["heap_length_mm"] * mm
+    mean_volume = 1.0 / np.sum(fractions / (pi / 6 * diameters**3))  # number-mean particle volume
+    heap_height = lvl["heap_particles"] * mean_volume / (INSERTION_SOLID_FRACTION * width * heap_length)
+    gap = roller["gap_um"] * um
+    radius = roller["diameter_mm"] * mm / 2
+    sample_x0 = lvl["sampling_start_mm"] * mm
+    sample_x1 = sample_x0 + lvl["sampling_length_mm"] * mm
+    sample_w = lvl.get("sampling_width_mm", lvl["strip_width_mm"]) * mm
+    y0 = (width - sample_w) / 2
+    t_r = rayleigh_time(diameters.min() / 2, mat["density_kg_m3"], mat["youngs_modulus_dem_Pa"],
+                        mat["poisson_ratio"])
+    sub = config["substrate"]
+    return Scene(
+        level=level, strip_width=width,
+        heap=(0.0, heap_length, gap, gap + heap_height), heap_particles=lvl["heap_particles"],
+        sampling_region=(sample_x0, sample_x1, y0, y0 + sample_w),
+        travel_end=sample_x1 + lvl["run_out_mm"] * mm,
+        roller_radius=radius, roller_gap=gap, roller_facets=roller["facets_around"],
+        diameters=tuple(diameters), mass_fractions=tuple(fractions),
+        density=mat["density_kg_m3"], youngs_modulus=mat["youngs_modulus_dem_Pa"],
+        poisson_ratio=mat["poisson_ratio"], restitution=mat["restitution"],
+        friction_particle=mat["sliding_friction_particle"], friction_wall=mat["sliding_friction_wall"],
+        rolling_friction=mat["rolling_friction"], cohesion_energy_density=mat["cohesion_energy_density_J_m3"],
+        timestep=config["timestep"]["rayleigh_fraction"] * t_r, rayleigh_time=t_r,
+        max_rayleigh_fraction=config["timestep"]["max_rayleigh_fraction"],
+        settle_time=lvl["settle_time_s"], rest_time=lvl["rest_time_s"],
+        rest_speed=config["rest_rms_speed_mm_s"] * mm,
+        profilometer_lines=lvl["profilometer_lines"], mpi_ranks=lvl["mpi_ranks"],
+        substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
+                   "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "stl": sub["stl"]},
+        rough_x=(sample_x0 - 0.5 * mm, sample_x1 + 0.5 * mm),
+        substrate_x=(-(2 * heap_height + mm), sample_x1 + lvl["run_out_mm"] * mm + radius + mm),
+        box=(-(2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
+             sample_x1 + lvl["run_out_mm"] * mm + radius + 2 * mm,
+             0.0, width,
+             -max(gap, 6 * sub["sq_um"] * um) - 0.2 * mm, gap + 2 * radius + mm),
+    )
