@@ -1,0 +1,130 @@
+"""Scene geometry: the rough substrate and the roller, as STL meshes in metres.
+
+Axes: x along the roller's travel, y along the roller's axis (the periodic
+strip), z up; the substrate's mean plane is z = 0.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+
+def gaussian_random_field(nx: int, ny: int, spacing: float, correlation_length: float,
+                          rms: float, seed: int) -> np.ndarray:
+    """Heights [m] of a zero-mean Gaussian random field on an ``nx`` x ``ny`` grid.
+
+    Gaussian autocorrelation ``exp(-r^2 / lc^2)``, synthesised by filtering white
+    noise in Fourier space; periodic in both directions. Rescaled so that the
+    nodal RMS height equals ``rms`` exactly.
+    """
+    rng = np.random.default_rng(seed)
+    kx = 2 * np.pi * np.fft.fftfreq(nx, d=spacing)
+    ky = 2 * np.pi * np.fft.fftfreq(ny, d=spacing)
+    k2 = kx[:, None] ** 2 + ky[None, :] ** 2
+    amplitude = np.exp(-k2 * correlation_length**2 / 8)  # sqrt of the Gaussian spectrum
+    field = np.fft.ifft2(np.fft.fft2(rng.standard_normal((nx, ny))) * amplitude).real
+    field -= field.mean()
+    return field * (rms / field.std()) if rms > 0 else np.zeros_like(field)
+
+
+def height_field_mesh(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> trimesh.Trimesh:
+    """Triangulate heights ``z[i, j]`` at ``(x[i], y[j])``; normals point up (+z)."""
+    nx, ny = z.shape
+    xx, yy = np.meshgrid(x, y, indexing="ij")
+    vertices = np.column_stack([xx.ravel(), yy.ravel(), z.ravel()])
+    idx = np.arange(nx * ny).reshape(nx, ny)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    return trimesh.Trimesh(vertices, faces, process=False)
+
+
+def rough_substrate(x_range: tuple, width: float, spacing: float, correlation_length: float,
+                    rms: float, seed: int, rough_x: tuple | None = None, taper: float = 0.0,
+                    flat_spacing: float | None = None) -> trimesh.Trimesh:
+    """A substrate over ``x_range`` x ``[0, width]`` [m], periodic across y.
+
+    Rough (a Gaussian random field of RMS height ``rms`` over ``rough_x``,
+    default all of ``x_range``) where the layer is measured; outside, it ramps
+    to the flat mean plane over ``taper`` [m] (a cosine window) and continues
+    flat on a coarse grid of ``flat_spacing`` [m]: LIGGGHTS pays per triangle
+    per step, and the heap's path needs no roughness.
+
+    The node spacing across y is adjusted so that a whole number of cells fits
+    the strip; the row at y = width repeats the row at y = 0, so the surface
+    is seamless through the periodic boundary.
+    """
+    rough_x = x_range if rough_x is None else rough_x
+    r0, r1 = max(x_range[0], rough_x[0] - taper), min(x_range[1], rough_x[1] + taper)
+    nx = int(np.ceil((r1 - r0) / spacing)) + 1
+    x_rough = r0 + spacing * np.arange(nx)
+    ny = max(int(round(width / spacing)), 2)
+    field = gaussian_random_field(nx, ny, spacing, correlation_length, rms, seed)
+    core = (x_rough >= rough_x[0]) & (x_rough <= rough_x[1])
+    if rms > 0:
+        field *= rms / field[core].std()
+    ramp = np.clip(np.minimum(x_rough - r0, x_rough[-1] - x_rough) / taper, 0, 1) if taper > 0 else 1.0
+    field *= (0.5 - 0.5 * np.cos(np.pi * ramp))[:, None] if taper > 0 else 1.0
+    flat_spacing = flat_spacing or 10 * spacing
+    before = np.linspace(x_range[0], r0, max(int(np.ceil((r0 - x_range[0]) / flat_spacing)), 1) + 1)[:-1]
+    after = np.linspace(x_rough[-1], max(x_range[1], x_rough[-1]),
+                        max(int(np.ceil((x_range[1] - x_rough[-1]) / flat_spacing)), 1) + 1)[1:]
+    x = np.concatenate([before, x_rough, after])
+    z = np.zeros((len(x), ny))
+    z[len(before):len(before) + nx] = field
+    z = np.concatenate([z, z[:, :1]], axis=1)
+    return height_field_mesh(x, np.linspace(0.0, width, ny + 1), z)
+
+
+def substrate_rms(mesh: trimesh.Trimesh, x_range: tuple | None = None) -> tuple[float, float]:
+    """(mean height, Sq) [m] of a height-field mesh, area-weighted over its
+    triangles (those with centres inside ``x_range`` [m], if given).
+
+    Uses the exact mean and mean square of a linear function over each triangle.
+    """
+    z = mesh.vertices[mesh.faces][:, :, 2]
+    area = mesh.area_faces * np.abs(mesh.face_normals[:, 2])  # projected area
+    if x_range is not None:
+        cx = mesh.triangles_center[:, 0]
+        area = area * ((cx >= x_range[0]) & (cx <= x_range[1]))
+    mean = np.sum(area * z.mean(1)) / area.sum()
+    zc = z - mean
+    mean_square = (np.sum(zc**2, 1) + zc[:, 0] * zc[:, 1] + zc[:, 1] * zc[:, 2] + zc[:, 0] * zc[:, 2]) / 6
+    return float(mean), float(np.sqrt(np.sum(area * mean_square) / area.sum()))
+
+
+def roller(diameter: float, length: float, facets: int, capped: bool = True) -> trimesh.Trimesh:
+    """A cylinder of ``diameter`` and ``length`` [m], axis along y from y=0 to y=length,
+    centred on x = z = 0, normals outward.
+
+    ``capped=False`` gives the lateral surface alone: in a periodic strip the
+    roller is endless, and end caps on the periodic boundary would be walls.
+    """
+    cylinder = trimesh.creation.cylinder(radius=diameter / 2, height=length, sections=facets)
+    cylinder.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))  # z -> y
+    cylinder.apply_translation([0.0, length / 2, 0.0])
+    if capped:
+        cylinder.fix_normals()
+        return cylinder
+    radial = np.hypot(cylinder.vertices[:, 0], cylinder.vertices[:, 2])
+    lateral = np.all(np.isclose(radial[cylinder.faces], diameter / 2), axis=1)
+    shell = cylinder.submesh([np.flatnonzero(lateral)], append=True)
+    return shell
+
+
+def write_stl(mesh: trimesh.Trimesh, path: str | Path) -> Path:
+    """Write an ASCII STL atomically (a temp file in the same folder, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".stl.tmp")
+    with os.fdopen(fd, "wb") as f:
+        f.write(trimesh.exchange.stl.export_stl_ascii(mesh).encode())
+    os.replace(tmp, path)
+    return path
+
+
+def load_stl(path: str | Path) -> trimesh.Trimesh:
+    return trimesh.load_mesh(str(path), file_type="stl", process=False)

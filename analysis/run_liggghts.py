@@ -1,0 +1,181 @@
+"""Render a LIGGGHTS input from ``templates/``, run the real ``liggghts`` binary,
+and read its log: fail loudly, with the error line and the input line it died at.
+
+Traps of the Debian LIGGGHTS 3.8 build that this module guards against:
+
+* it can die through ``MPI_Abort`` without printing its ERROR line (seen with a
+  seed used twice), so seeds are checked here, before the run;
+* ``-screen none`` crashes ``fix insert/pack``: the screen goes to a file;
+* parallel runs in one folder would all write ``log.liggghts``: every run
+  gets its own ``-log``.
+
+Command line: ``python -m analysis.run_liggghts INPUT [--np N] [--log FILE]``
+runs an input file and prints its health as JSON.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jinja2
+import numpy as np
+import pandas as pd
+
+from analysis.config import is_prime
+
+TEMPLATES = Path(__file__).resolve().parent.parent / "templates"
+LIGGGHTS = os.environ.get("SPREADMAP_LIGGGHTS", "liggghts")
+_SEED_PATTERNS = [r"particletemplate/sphere\s+(\S+)", r"particledistribution/discrete\S*\s+(\S+)",
+                  r"\bseed\s+(\S+)"]
+
+
+class LiggghtsError(RuntimeError):
+    """LIGGGHTS failed, or its run is not physically sound; the message says why."""
+
+
+def render(template: str, **context) -> str:
+    """Render ``templates/<template>`` with ``context``; unknown names are errors."""
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), undefined=jinja2.StrictUndefined,
+                             trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    return env.get_template(template).render(**context)
+
+
+def check_seeds(text: str) -> list[int]:
+    """Every random seed in an input must be a distinct prime > 10000.
+
+    LIGGGHTS aborts, sometimes silently, otherwise; checked here instead.
+    """
+    commands = [line.split("#")[0] for line in text.splitlines()]
+    seeds = [tok for line in commands for pat in _SEED_PATTERNS for tok in re.findall(pat, line)]
+    values = []
+    for tok in seeds:
+        if not tok.isdigit() or int(tok) <= 10000 or not is_prime(int(tok)):
+            raise LiggghtsError(f"seed {tok!r} is not a prime > 10000 (LIGGGHTS aborts on it)")
+        values.append(int(tok))
+    repeated = sorted({v for v in values if values.count(v) > 1})
+    if repeated:
+        raise LiggghtsError(f"seed(s) {repeated} used twice (LIGGGHTS aborts without an ERROR line)")
+    return values
+
+
+def mpi_command(ranks: int) -> list[str]:
+    """The launcher prefix for ``ranks`` MPI ranks (none for one rank)."""
+    if ranks <= 1:
+        return []
+    cmd = ["mpirun", "-np", str(ranks)]
+    if os.geteuid() == 0:
+        cmd.append("--allow-run-as-root")
+    if ranks > (os.cpu_count() or 1):
+        cmd.append("--oversubscribe")
+    return cmd
+
+
+def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str | Path | None = None) -> dict:
+    """Run LIGGGHTS on ``input_file``; return the parsed log (see :func:`read_log`).
+
+    The screen output goes to ``<log_file>.screen``. Raises
+    :class:`LiggghtsError` naming the ERROR line and the input command it died
+    at, or the tail of the screen when LIGGGHTS died without one.
+    """
+    input_file, log_file = Path(input_file).resolve(), Path(log_file).resolve()
+    if shutil.which(LIGGGHTS) is None:
+        raise LiggghtsError(f"'{LIGGGHTS}' not found on PATH: install it with `apt-get install liggghts` "
+                            "(or run the README's set-up command)")
+    check_seeds(input_file.read_text())
+    screen = log_file.with_name(log_file.name + ".screen")
+    cmd = mpi_command(ranks) + [LIGGGHTS, "-in", str(input_file), "-log", str(log_file)]
+    start = time.perf_counter()
+    with open(screen, "w") as out:
+        proc = subprocess.run(cmd, cwd=cwd or input_file.parent, stdout=out, stderr=subprocess.STDOUT,
+                              stdin=subprocess.DEVNULL)
+    wall = time.perf_counter() - start
+    log_text = log_file.read_text(errors="replace") if log_file.exists() else ""
+    screen_text = screen.read_text(errors="replace")
+    error = _error_message(log_text + "\n" + screen_text)
+    if proc.returncode != 0 or error:
+        where = _failing_command(log_text)
+        tail = "\n".join(screen_text.strip().splitlines()[-8:])
+        raise LiggghtsError(
+            f"LIGGGHTS failed on {input_file.name} (exit code {proc.returncode})\n"
+            f"  error: {error or 'no ERROR line printed (e.g. an MPI_Abort)'}\n"
+            f"  at input line: {where or 'unknown'}\n  last screen lines:\n{tail}\n"
+            f"  full log: {log_file}")
+    parsed = read_log(log_text)
+    parsed["wall_s"] = wall
+    parsed["ranks"] = ranks
+    return parsed
+
+
+def _error_message(text: str) -> str | None:
+    match = re.search(r"^ERROR[^:]*:.*$", text, re.MULTILINE)
+    return match.group(0).strip() if match else None
+
+
+def _failing_command(log_text: str) -> str | None:
+    """The last input command LIGGGHTS echoed to its log before the ERROR."""
+    head = log_text.split("ERROR")[0]
+    lines = [ln for ln in head.splitlines() if ln.strip() and not ln.startswith(("  ", "INFO", "WARNING"))]
+    commands = [ln for ln in lines if re.match(r"^[a-z_]+(\s|$)", ln)]
+    return commands[-1].strip() if commands else None
+
+
+def read_log(text: str) -> dict:
+    """Health figures from a LIGGGHTS log.
+
+    Returns a dict: ``thermo`` (DataFrame of every thermo block, columns as in
+    ``thermo_style``), ``inserted`` (particles inserted), ``atoms_final``,
+    ``max_rayleigh_fraction``/``max_hertz_fraction`` (time step over the
+    Rayleigh and Hertz times, from ``check/timestep/gran``), ``warnings``.
+    """
+    blocks, lines = [], text.splitlines()
+    for i, line in enumerate(lines):
+        names = line.split()
+        if names[:2] != ["Step", "Atoms"]:
+            continue
+        rows = []
+        for row in lines[i + 1:]:
+            if row.startswith("Loop time"):
+                break
+            parts = row.split()
+            if len(parts) == len(names) and re.fullmatch(r"-?\d+", parts[0]):
+                rows.append(parts)
+        if rows:
+            blocks.append(pd.DataFrame(np.array(rows, dtype=float), columns=names))
+    thermo = pd.concat(blocks, ignore_index=True) if blocks else pd.DataFrame()
+    inserted = sum(int(n) for n in re.findall(r"inserted\s+(\d+)\s+particle templates", text))
+    fractions = {key: float(thermo[col].max()) if col in thermo else float("nan")
+                 for key, col in (("max_rayleigh_fraction", "ts[1]"), ("max_hertz_fraction", "ts[2]"))}
+    return {"thermo": thermo, "inserted": inserted,
+            "atoms_final": int(thermo["Atoms"].iloc[-1]) if len(thermo) else 0,
+            "warnings": sorted(set(re.findall(r"^WARNING:.*$", text, re.MULTILINE))), **fractions}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("input", type=Path)
+    parser.add_argument("--np", type=int, default=1, help="MPI ranks")
+    parser.add_argument("--log", type=Path, help="log file (default: INPUT.log)")
+    args = parser.parse_args(argv)
+    if not args.input.is_file():
+        print(f"error: input file {str(args.input)!r} not found", file=sys.stderr)
+        return 2
+    try:
+        result = run(args.input, args.log or args.input.with_suffix(".log"), ranks=args.np)
+    except LiggghtsError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    thermo = result.pop("thermo")
+    result["steps"] = int(thermo["Step"].iloc[-1]) if len(thermo) else 0
+    print(json.dumps(result, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

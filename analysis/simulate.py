@@ -1,0 +1,278 @@
+"""One scene, run for real: make its geometry, settle its heap, spread it.
+
+Each step renders a template from ``templates/``, runs LIGGGHTS through
+:mod:`analysis.run_liggghts` and checks the result's health; an unsound run
+raises :class:`~analysis.run_liggghts.LiggghtsError`, never passes a result on.
+
+Command line (the workflow's rules call the same functions)::
+
+    python -m analysis.simulate geometry --level smoke --out results/smoke/meshes
+    python -m analysis.simulate settle   --level smoke --meshes results/smoke/meshes --out results/smoke/settle
+    python -m analysis.simulate spread   --level smoke --U 70 --omega -5 --meshes ... --settled ... --out ...
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from math import ceil
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import LinearNDInterpolator
+from scipy.spatial import cKDTree
+
+from analysis import geometry
+from analysis.config import ConfigError, Scene, liggghts_seeds, load_config, roller_motion, scene
+from analysis.dump import read_dump
+from analysis.run_liggghts import LiggghtsError, render, run
+
+THERMO_EVERY = 1000
+#: A particle counts as "through the substrate" when its centre is this many
+#: radii below the substrate surface under it.
+BELOW_SUBSTRATE_RADII = 0.5
+#: Largest tolerated particle-particle overlap, as a fraction of the smaller radius.
+MAX_OVERLAP = 0.05
+#: Length [m] over which the rough substrate ramps to flat outside the sampling region.
+ROUGH_TAPER = 0.5e-3
+
+
+def seeds(config: dict, s: Scene, replicate: int = 0) -> list[int]:
+    """LIGGGHTS seeds of a replicate: one per size class, the distribution, the insertion."""
+    return liggghts_seeds(config["random_seed"] + 1000 * replicate, len(s.diameters) + 2)
+
+
+def contact_model(s: Scene) -> str:
+    """The granular contact model: Hertz with tangential history, plus rolling
+    friction and cohesion only where their coefficients are non-zero."""
+    model = "model hertz tangential history"
+    if s.rolling_friction > 0:
+        model += " rolling_friction epsd2"
+    if s.cohesion_energy_density > 0:
+        model += " cohesion sjkr"
+    return model
+
+
+SKIN_DIAMETERS = 0.2
+REST_CHUNK_S = 0.005  # [s] between two at-rest checks
+
+
+def rest_loop(s: Scene, n_particles: int, max_time: float) -> dict:
+    """Template values for ``_until_rest.j2``: chunks of REST_CHUNK_S up to ``max_time``."""
+    mean_mass = s.density / np.sum(np.array(s.mass_fractions) / (np.pi / 6 * np.array(s.diameters) ** 3))
+    chunk = THERMO_EVERY * max(1, round(REST_CHUNK_S / s.timestep / THERMO_EVERY))
+    return {"chunk_steps": chunk, "max_chunks": max(1, ceil(max_time / (chunk * s.timestep))),
+            "rest_speed": s.rest_speed, "rest_ke": 0.5 * n_particles * mean_mass * s.rest_speed**2}
+
+
+def skin(s: Scene) -> float:
+    """Neighbour-list skin [m]: 20 % of the mean class diameter. Each particle
+    checks every substrate triangle within its radius + skin, every step."""
+    return SKIN_DIAMETERS * float(np.mean(s.diameters))
+
+
+# --------------------------------------------------------------------------
+# Geometry
+
+def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path = Path(".")) -> dict:
+    """Write ``substrate.stl``, ``roller.stl`` (closed) and ``roller_shell.stl``
+    (its lateral surface, what the periodic strip loads) into ``outdir``.
+
+    A user's STL (``substrate.stl`` in the config, metres) replaces the
+    generated substrate; it must cover the bed, and no substrate peak may reach
+    the roller.
+    """
+    s, out = scene(config, level), Path(outdir)
+    if s.substrate["stl"]:
+        substrate = geometry.load_stl(base_dir / s.substrate["stl"])
+        lo, hi = substrate.bounds
+        need = (s.substrate_x[0], s.substrate_x[1], 0.0, s.strip_width)
+        if lo[0] > need[0] or hi[0] < need[1] or lo[1] > 1e-9 or hi[1] < s.strip_width - 1e-9:
+            raise ConfigError(f"config key 'substrate.stl' = {s.substrate['stl']!r}: covers x {lo[0]:.4g}..{hi[0]:.4g} m,"
+                              f" y {lo[1]:.4g}..{hi[1]:.4g} m; the bed needs x {need[0]:.4g}..{need[1]:.4g},"
+                              f" y 0..{s.strip_width:.4g} m")
+    else:
+        sub = s.substrate
+        substrate = geometry.rough_substrate(s.substrate_x, s.strip_width, sub["grid_spacing"],
+                                             sub["correlation_length"], sub["sq"], sub["seed"],
+                                             rough_x=s.rough_x, taper=ROUGH_TAPER)
+    peak = substrate.vertices[:, 2].max()
+    if peak >= s.roller_gap:
+        raise ConfigError(f"config key 'roller.gap_um' = {s.roller_gap * 1e6:g}: the substrate's highest peak "
+                          f"({peak * 1e6:.0f} um) reaches the roller")
+    if substrate.vertices[:, 2].min() <= s.box[4]:
+        raise ConfigError(f"substrate reaches below the simulation box (z = {s.box[4]:.4g} m)")
+    mean, sq = geometry.substrate_rms(substrate, s.sampling_region[:2])
+    paths = {"substrate": geometry.write_stl(substrate, out / "substrate.stl"),
+             "roller": geometry.write_stl(geometry.roller(2 * s.roller_radius, s.strip_width, s.roller_facets),
+                                          out / "roller.stl"),
+             "roller_shell": geometry.write_stl(
+                 geometry.roller(2 * s.roller_radius, s.strip_width, s.roller_facets, capped=False),
+                 out / "roller_shell.stl")}
+    return {**{k: str(v) for k, v in paths.items()}, "substrate_mean_m": mean, "substrate_sq_m": sq,
+            "substrate_peak_m": float(peak), "substrate_triangles": len(substrate.faces)}
+
+
+def substrate_height(substrate_stl: str | Path):
+    """A vectorised z(x, y) [m] of a height-field STL (linear between its vertices)."""
+    mesh = geometry.load_stl(substrate_stl)
+    xy, inverse = np.unique(mesh.vertices[:, :2].round(12), axis=0, return_inverse=True)
+    z = np.full(len(xy), -np.inf)
+    np.maximum.at(z, inverse.ravel(), mesh.vertices[:, 2])
+    return LinearNDInterpolator(xy, z)
+
+
+# --------------------------------------------------------------------------
+# Health of a finished run
+
+def layer_health(atoms, s: Scene, substrate_stl, expected_atoms: int) -> dict:
+    """Check a final state: lost particles, particles through the substrate,
+    overlaps, kinetic energy. Returns the figures; raises on a failure."""
+    xyz = atoms[["x", "y", "z"]].to_numpy()
+    radius = atoms["radius"].to_numpy()
+    below = (xyz[:, 2] - substrate_height(substrate_stl)(xyz[:, 0], xyz[:, 1])) / radius
+    pairs = cKDTree(xyz, boxsize=None).query_pairs(2 * radius.max(), output_type="ndarray")
+    gaps = np.linalg.norm(xyz[pairs[:, 0]] - xyz[pairs[:, 1]], axis=1) - radius[pairs].sum(1)
+    overlap = np.max(-gaps / radius[pairs].min(1), initial=0.0)
+    mass = s.density * 4 / 3 * np.pi * radius**3
+    speed2 = (atoms[["vx", "vy", "vz"]].to_numpy() ** 2).sum(1)
+    health = {"atoms": len(atoms), "lost": expected_atoms - len(atoms),
+              "through_substrate": int(np.sum(np.nan_to_num(below, nan=0.0) < -BELOW_SUBSTRATE_RADII)),
+              "max_overlap_fraction": float(overlap),
+              "kinetic_energy_J": float(0.5 * np.sum(mass * speed2)),
+              "max_speed_m_s": float(np.sqrt(speed2.max(initial=0.0)))}
+    problems = []
+    if health["lost"]:
+        problems.append(f"{health['lost']} particles lost (left the box)")
+    if health["through_substrate"]:
+        problems.append(f"{health['through_substrate']} particles fell through the substrate")
+    if overlap > MAX_OVERLAP:
+        problems.append(f"largest overlap {overlap:.1%} of a radius exceeds {MAX_OVERLAP:.0%}")
+    if not np.all(np.isfinite(xyz)):
+        problems.append("non-finite positions")
+    if problems:
+        raise LiggghtsError("unsound run: " + "; ".join(problems))
+    return health
+
+
+def _check_timestep(log: dict, s: Scene) -> None:
+    if log["max_rayleigh_fraction"] > s.max_rayleigh_fraction * (1 + 1e-6):
+        raise LiggghtsError(f"time step is {log['max_rayleigh_fraction']:.3f} of the Rayleigh time, above "
+                            f"timestep.max_rayleigh_fraction = {s.max_rayleigh_fraction}")
+
+
+# --------------------------------------------------------------------------
+# Settle and spread
+
+def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, replicate: int = 0) -> dict:
+    """Insert the heap and let it settle on the substrate; writes ``settled.restart``,
+    ``settled.dump``, ``settle.in``, ``settle.log`` and ``health.json`` into ``outdir``."""
+    s, out, meshes = scene(config, level), Path(outdir), Path(meshes).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    if s.timestep > s.max_rayleigh_fraction * s.rayleigh_time:
+        raise LiggghtsError(f"time step {s.timestep:.3g} s exceeds the allowed fraction of the Rayleigh time")
+    text = render("settle.in.j2", s=s, contact=contact_model(s), seeds=seeds(config, s, replicate), box=[f"{v:.6g}" for v in s.box],
+                  skin=skin(s), thermo_every=THERMO_EVERY, **rest_loop(s, s.heap_particles, s.settle_time),
+                  substrate_stl=meshes / "substrate.stl", restart="settled.restart", dump="settled.dump")
+    (out / "settle.in").write_text(text)
+    log = run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks)
+    _check_timestep(log, s)
+    if log["inserted"] != s.heap_particles:
+        raise LiggghtsError(f"inserted {log['inserted']} of {s.heap_particles} particles: the heap region is too "
+                            "small for heap_particles (see fidelity level)")
+    atoms = read_dump(out / "settled.dump").atoms
+    health = layer_health(atoms, s, meshes / "substrate.stl", s.heap_particles)
+    summary = {"wall_s": log["wall_s"], "steps": int(log["thermo"]["Step"].iloc[-1]),
+               "timestep_s": s.timestep, "rayleigh_fraction": log["max_rayleigh_fraction"],
+               "hertz_fraction": log["max_hertz_fraction"], "inserted": log["inserted"], **health}
+    (out / "health.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def roller_start(atoms, s: Scene, clearance: float | None = None) -> float:
+    """x [m] of the roller axis just behind the settled heap (no particle touched).
+
+    For each particle, the axis at height ``gap + R`` must stay ``R + r + clearance``
+    away; the start is the smallest such x over all particles.
+    """
+    clearance = 0.2 * min(s.diameters) if clearance is None else clearance
+    zc = s.roller_gap + s.roller_radius
+    reach = s.roller_radius + atoms["radius"].to_numpy() + clearance
+    dz = np.minimum(np.abs(atoms["z"].to_numpy() - zc), reach)
+    return float(np.min(atoms["x"].to_numpy() - np.sqrt(reach**2 - dz**2)))
+
+
+def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: str | Path,
+           settled: str | Path, outdir: str | Path, movie_every: int = 0) -> dict:
+    """Spread the settled heap at ``U_mm_s`` [mm/s] and ``omega_rad_s`` [rad/s].
+
+    Writes ``spread.in``, ``spread.log``, ``final.dump`` and ``health.json``
+    into ``outdir`` and returns the health figures (with wall time and steps).
+    """
+    s, out = scene(config, level), Path(outdir)
+    meshes, settled = Path(meshes).resolve(), Path(settled).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    if U_mm_s <= 0:
+        raise ConfigError(f"spreader speed U = {U_mm_s} mm/s must be positive")
+    speed = U_mm_s * 1e-3
+    atoms0 = read_dump(settled / "settled.dump").atoms
+    x0 = roller_start(atoms0, s)
+    if x0 - s.roller_radius <= s.box[0]:
+        raise LiggghtsError(f"roller start x = {x0:.4g} m puts the roller outside the box (x >= {s.box[0]:.4g} m)")
+    travel_time = (s.travel_end - x0) / speed
+    motion = roller_motion(speed, omega_rad_s, s.roller_radius)
+    text = render("spread.in.j2", s=s, contact=contact_model(s), box=[f"{v:.6g}" for v in s.box], U_mm_s=U_mm_s, omega_rad_s=omega_rad_s, motion=motion,
+                  restart=settled / "settled.restart", skin=skin(s), thermo_every=THERMO_EVERY,
+                  substrate_stl=meshes / "substrate.stl", roller_stl=meshes / "roller_shell.stl",
+                  roller_x=x0, roller_z=s.roller_gap + s.roller_radius,
+                  travel_steps=ceil(travel_time / s.timestep), **rest_loop(s, len(atoms0), s.rest_time),
+                  movie_every=movie_every, movie="movie.dump", mesh_movie="roller_*.vtk", dump="final.dump")
+    (out / "spread.in").write_text(text)
+    log = run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks)
+    _check_timestep(log, s)
+    atoms = read_dump(out / "final.dump").atoms
+    health = layer_health(atoms, s, meshes / "substrate.stl", len(atoms0))
+    thermo = log["thermo"]
+    summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"],
+               "steps": int(thermo["Step"].iloc[-1] - thermo["Step"].iloc[0]), "timestep_s": s.timestep,
+               "roller_start_m": x0, "roller_travel_m": speed * ceil(travel_time / s.timestep) * s.timestep,
+               "rayleigh_fraction": log["max_rayleigh_fraction"], "hertz_fraction": log["max_hertz_fraction"],
+               "particle_steps_per_s": len(atoms) * (thermo["Step"].iloc[-1] - thermo["Step"].iloc[0]) / log["wall_s"],
+               **health}
+    (out / "health.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+# --------------------------------------------------------------------------
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description="Run one step of a spreading scene with LIGGGHTS.")
+    parser.add_argument("step", choices=["geometry", "settle", "spread"])
+    parser.add_argument("--config", type=Path, default=Path("config.yaml"))
+    parser.add_argument("--level", help="fidelity level (default: the config's `level`)")
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--meshes", type=Path)
+    parser.add_argument("--settled", type=Path)
+    parser.add_argument("--U", type=float, help="spreader translation speed, mm/s")
+    parser.add_argument("--omega", type=float, help="roller angular speed, rad/s (+: counter-rotation)")
+    args = parser.parse_args(argv)
+    try:
+        config = load_config(args.config)
+        level = args.level or config["level"]
+        if args.step == "geometry":
+            result = make_geometry(config, level, args.out, base_dir=args.config.parent)
+        elif args.step == "settle":
+            result = settle(config, level, args.meshes, args.out)
+        else:
+            if args.U is None or args.omega is None:
+                parser.error("spread needs --U and --omega")
+            result = spread(config, level, args.U, args.omega, args.meshes, args.settled, args.out)
+    except (ConfigError, LiggghtsError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2 if isinstance(err, ConfigError) else 1
+    print(json.dumps(result, indent=2, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
