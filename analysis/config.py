@@ -25,6 +25,22 @@ class ConfigError(ValueError):
     """A configuration value is wrong; the message names its key and value."""
 
 
+def coerce_cli_values(value):
+    """Numbers, booleans and nulls from strings, recursively.
+
+    Snakemake parses nested ``--config key='{...}'`` values with YAML's
+    BaseLoader, which leaves every scalar a string; this restores the types
+    so that ``--config sweep='{"U_mm_s": [40, 70]}'`` works.
+    """
+    if isinstance(value, dict):
+        return {k: coerce_cli_values(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [coerce_cli_values(v) for v in value]
+    if isinstance(value, str):
+        return yaml.safe_load(value) if value.strip() else value
+    return value
+
+
 def load_schema() -> dict:
     return yaml.safe_load(SCHEMA_PATH.read_text())
 
@@ -96,8 +112,10 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
         if lvl["sampling_start_mm"] < lvl["heap_length_mm"]:
             _fail(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
                   f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")
-    if config["surrogate"]["n_test"] >= len(config["sweep"]["U_mm_s"]) * len(config["sweep"]["omega_rad_s"]):
-        _fail("surrogate.n_test", config["surrogate"]["n_test"], "leaves no run to train on")
+    n_runs = len(config["sweep"]["U_mm_s"]) * len(config["sweep"]["omega_rad_s"])
+    if config["surrogate"]["n_test"] > n_runs - 3:
+        _fail("surrogate.n_test", config["surrogate"]["n_test"],
+              f"leaves fewer than 3 of the sweep's {n_runs} (U, omega) points to train on")
 
 
 # --------------------------------------------------------------------------
@@ -199,7 +217,7 @@ class Scene:
     profilometer_lines: int
     mpi_ranks: int
     substrate: dict
-    substrate_x: tuple      # (xlo, xhi) the substrate must cover [m]
+    substrate_x: tuple      # (xlo, xhi) the substrate must cover: the whole box [m]
     rough_x: tuple          # (xlo, xhi) where the substrate is rough (around the sampling region) [m]
     box: tuple              # (xlo, xhi, ylo, yhi, zlo, zhi) of the simulation box [m]
 
@@ -227,6 +245,10 @@ def scene(config: dict, level: str | None = None) -> Scene:
     t_r = rayleigh_time(diameters.min() / 2, mat["density_kg_m3"], mat["youngs_modulus_dem_Pa"],
                         mat["poisson_ratio"])
     sub = config["substrate"]
+    box = (-(2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
+           sample_x1 + lvl["run_out_mm"] * mm + radius + 2 * mm,
+           0.0, width,
+           -max(gap, 6 * sub["sq_um"] * um) - 0.2 * mm, gap + 2 * radius + 5 * mm)
     return Scene(
         level=level, strip_width=width,
         heap=(0.0, heap_length, gap, gap + heap_height), heap_particles=lvl["heap_particles"],
@@ -246,9 +268,6 @@ def scene(config: dict, level: str | None = None) -> Scene:
         substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
                    "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "stl": sub["stl"]},
         rough_x=(sample_x0 - 0.5 * mm, sample_x1 + 0.5 * mm),
-        substrate_x=(-(2 * heap_height + mm), sample_x1 + lvl["run_out_mm"] * mm + radius + mm),
-        box=(-(2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
-             sample_x1 + lvl["run_out_mm"] * mm + radius + 2 * mm,
-             0.0, width,
-             -max(gap, 6 * sub["sq_um"] * um) - 0.2 * mm, gap + 2 * radius + mm),
+        box=box,
+        substrate_x=box[:2],
     )

@@ -47,8 +47,9 @@ def rough_substrate(x_range: tuple, width: float, spacing: float, correlation_le
                     flat_spacing: float | None = None) -> trimesh.Trimesh:
     """A substrate over ``x_range`` x ``[0, width]`` [m], periodic across y.
 
-    Rough (a Gaussian random field of RMS height ``rms`` over ``rough_x``,
-    default all of ``x_range``) where the layer is measured; outside, it ramps
+    Rough (a Gaussian random field over ``rough_x``, default all of
+    ``x_range``, scaled so that the mesh's own area-weighted RMS height there
+    is ``rms``) where the layer is measured; outside, it ramps
     to the flat mean plane over ``taper`` [m] (a cosine window) and continues
     flat on a coarse grid of ``flat_spacing`` [m]: LIGGGHTS pays per triangle
     per step, and the heap's path needs no roughness.
@@ -63,9 +64,6 @@ def rough_substrate(x_range: tuple, width: float, spacing: float, correlation_le
     x_rough = r0 + spacing * np.arange(nx)
     ny = max(int(round(width / spacing)), 2)
     field = gaussian_random_field(nx, ny, spacing, correlation_length, rms, seed)
-    core = (x_rough >= rough_x[0]) & (x_rough <= rough_x[1])
-    if rms > 0:
-        field *= rms / field[core].std()
     ramp = np.clip(np.minimum(x_rough - r0, x_rough[-1] - x_rough) / taper, 0, 1) if taper > 0 else 1.0
     field *= (0.5 - 0.5 * np.cos(np.pi * ramp))[:, None] if taper > 0 else 1.0
     flat_spacing = flat_spacing or 10 * spacing
@@ -76,7 +74,10 @@ def rough_substrate(x_range: tuple, width: float, spacing: float, correlation_le
     z = np.zeros((len(x), ny))
     z[len(before):len(before) + nx] = field
     z = np.concatenate([z, z[:, :1]], axis=1)
-    return height_field_mesh(x, np.linspace(0.0, width, ny + 1), z)
+    mesh = height_field_mesh(x, np.linspace(0.0, width, ny + 1), z)
+    if rms > 0:  # linear facets lower the RMS below the nodes': calibrate the mesh itself
+        mesh.vertices[:, 2] *= rms / substrate_rms(mesh, rough_x)[1]
+    return mesh
 
 
 def substrate_rms(mesh: trimesh.Trimesh, x_range: tuple | None = None) -> tuple[float, float]:
