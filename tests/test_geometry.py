@@ -1,0 +1,103 @@
+"""Generated geometry: the substrate's roughness and the roller's shape."""
+import numpy as np
+import pytest
+import yaml
+
+from analysis import geometry
+from analysis.config import ConfigError, load_config, scene
+from analysis.simulate import make_geometry
+
+from tests.test_config import ROOT
+
+
+@pytest.fixture(scope="module")
+def config():
+    return load_config(ROOT / "config.yaml")
+
+
+@pytest.fixture(scope="module")
+def meshes(config, tmp_path_factory):
+    out = tmp_path_factory.mktemp("meshes")
+    summary = make_geometry(config, "default", out)
+    return out, summary
+
+
+def test_substrate_sq_within_2_percent_of_target(config, meshes):
+    out, summary = meshes
+    s = scene(config, "default")
+    mesh = geometry.load_stl(out / "substrate.stl")
+    mean, sq = geometry.substrate_rms(mesh, s.sampling_region[:2])
+    target = config["substrate"]["sq_um"] * 1e-6
+    assert sq == pytest.approx(target, rel=0.02)
+    assert abs(mean) < 0.2 * target          # mean plane at z = 0
+    assert summary["substrate_sq_m"] == pytest.approx(sq)
+    assert summary["substrate_peak_m"] < s.roller_gap
+
+
+def test_substrate_covers_the_box_and_is_seamless_across_the_periodic_strip(config, meshes):
+    out, _ = meshes
+    s = scene(config, "default")
+    v = geometry.load_stl(out / "substrate.stl").vertices
+    assert v[:, 0].min() <= s.box[0] and v[:, 0].max() >= s.box[1]
+    assert v[:, 1].min() == pytest.approx(0) and v[:, 1].max() == pytest.approx(s.strip_width)
+    edge0, edge1 = v[np.isclose(v[:, 1], 0)], v[np.isclose(v[:, 1], s.strip_width)]
+    z0 = dict(zip(np.round(edge0[:, 0], 9), edge0[:, 2]))
+    z1 = dict(zip(np.round(edge1[:, 0], 9), edge1[:, 2]))
+    assert z0.keys() == z1.keys() and all(z0[k] == pytest.approx(z1[k]) for k in z0)
+
+
+def test_random_field_is_gaussian_with_target_rms():
+    z = geometry.gaussian_random_field(256, 256, 50e-6, 300e-6, 79e-6, seed=3)
+    assert z.std() == pytest.approx(79e-6)
+    assert abs(z.mean()) < 1e-12
+    kurtosis = np.mean((z / z.std()) ** 4)
+    assert 2.7 < kurtosis < 3.3                 # Gaussian: 3
+
+
+def test_roller_is_a_watertight_cylinder_of_the_papers_size():
+    r = geometry.roller(0.030, 0.070, 180)
+    assert r.is_watertight and r.is_winding_consistent and r.volume > 0
+    lo, hi = r.bounds
+    assert hi[1] - lo[1] == pytest.approx(0.070)                   # length along y
+    assert hi[0] - lo[0] == pytest.approx(0.030, rel=1e-3)         # diameter
+    assert hi[2] - lo[2] == pytest.approx(0.030, rel=1e-3)
+    assert r.volume == pytest.approx(np.pi * 0.015**2 * 0.070, rel=1e-3)
+    lateral = np.abs(r.face_normals[:, 1]) < 0.5
+    radial = r.triangles_center[lateral][:, [0, 2]]
+    assert np.all(np.sum(radial * r.face_normals[lateral][:, [0, 2]], 1) > 0)   # outward
+
+
+def test_roller_shell_has_no_end_caps(config, meshes):
+    out, _ = meshes
+    shell = geometry.load_stl(out / "roller_shell.stl")
+    assert not shell.is_watertight
+    assert np.allclose(np.abs(shell.face_normals[:, 1]), 0, atol=1e-9)
+    assert np.allclose(np.hypot(shell.vertices[:, 0], shell.vertices[:, 2]), 0.015)
+
+
+def test_users_stl_replaces_the_generated_substrate(config, tmp_path):
+    s = scene(config, "smoke")
+    x = np.arange(s.box[0], s.box[1] + 2e-5, 2e-5)
+    y = np.linspace(0, s.strip_width, 11)
+    z = 40e-6 * np.sin(2 * np.pi * x / 1e-3)[:, None] * np.ones(len(y))
+    geometry.write_stl(geometry.height_field_mesh(x, y, z), tmp_path / "mine.stl")
+    mine = yaml.safe_load((ROOT / "config.yaml").read_text())
+    mine["substrate"]["stl"] = str(tmp_path / "mine.stl")
+    summary = make_geometry(load_config(mine), "smoke", tmp_path / "out")
+    assert summary["substrate_sq_m"] == pytest.approx(40e-6 / np.sqrt(2), rel=0.02)
+
+
+def test_users_stl_too_small_for_the_bed_is_refused(config, tmp_path):
+    flat = geometry.height_field_mesh(np.linspace(0, 1e-3, 3), np.linspace(0, 1e-3, 3), np.zeros((3, 3)))
+    geometry.write_stl(flat, tmp_path / "small.stl")
+    mine = yaml.safe_load((ROOT / "config.yaml").read_text())
+    mine["substrate"]["stl"] = str(tmp_path / "small.stl")
+    with pytest.raises(ConfigError, match="substrate.stl"):
+        make_geometry(load_config(mine), "smoke", tmp_path / "out")
+
+
+def test_substrate_reaching_the_roller_is_refused(tmp_path):
+    mine = yaml.safe_load((ROOT / "config.yaml").read_text())
+    mine["substrate"]["sq_um"] = 150
+    with pytest.raises(ConfigError, match="roller.gap_um"):
+        make_geometry(load_config(mine), "smoke", tmp_path)

@@ -1,0 +1,145 @@
+"""Real LIGGGHTS runs: the smoke scene settles and spreads, the material
+reaches the engine in the right units, and failures are loud."""
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+from analysis.config import load_config, scene  # noqa: E402
+from analysis.drop_test import drop_sphere, first_bounce, free_fall_time  # noqa: E402
+from analysis.dump import read_dump  # noqa: E402
+from analysis.run_liggghts import LiggghtsError, check_seeds, read_log, run  # noqa: E402
+from analysis.simulate import make_geometry, settle, spread, substrate_height  # noqa: E402
+
+from tests.test_config import ROOT  # noqa: E402
+
+U_MM_S, OMEGA = 100.0, -5.0
+
+
+@pytest.fixture(scope="module")
+def config():
+    return load_config(ROOT / "config.yaml")
+
+
+@pytest.fixture(scope="module")
+def smoke(config, tmp_path_factory):
+    """Geometry, a settled heap and one spreading pass at U = 100 mm/s, omega = -5 rad/s."""
+    root = tmp_path_factory.mktemp("smoke")
+    make_geometry(config, "smoke", root / "meshes")
+    settled = settle(config, "smoke", root / "meshes", root / "settle")
+    result = spread(config, "smoke", U_MM_S, OMEGA, root / "meshes", root / "settle", root / "run")
+    return {"root": root, "settled": settled, "spread": result, "scene": scene(config, "smoke")}
+
+
+def roller_state(path):
+    import pyvista as pv
+    mesh = pv.read(path)
+    return mesh.cell_centers().points, mesh.cell_data["v"]
+
+
+def test_heap_settles_whole(smoke):
+    h, s = smoke["settled"], smoke["scene"]
+    assert h["inserted"] == h["atoms"] == s.heap_particles
+    assert h["lost"] == 0 and h["through_substrate"] == 0
+    assert h["max_overlap_fraction"] < 0.02
+
+
+def test_roller_travels_U_t_and_turns_as_the_paper_says(smoke):
+    run_dir, s = smoke["root"] / "run", smoke["scene"]
+    start, end = sorted(run_dir.glob("roller_*.vtk"), key=lambda p: int(p.stem.split("_")[1]))
+    steps = int(end.stem.split("_")[1])
+    c0, _ = roller_state(start)
+    c1, v1 = roller_state(end)
+    travelled = c1[:, 0].mean() - c0[:, 0].mean()
+    assert travelled == pytest.approx(U_MM_S * 1e-3 * steps * s.timestep, rel=1e-5)  # dt printed to 6 digits
+    bottom = np.argmin(c1[:, 2])
+    # the roller's bottom point moves at U + omega R along the travel (paper: +25 mm/s here)
+    assert v1[bottom, 0] * 1e3 == pytest.approx(U_MM_S + OMEGA * 15.0, abs=0.2)
+    top = np.argmax(c1[:, 2])
+    assert v1[top, 0] * 1e3 == pytest.approx(U_MM_S - OMEGA * 15.0, abs=0.2)
+
+
+def test_spread_lays_powder_past_the_heap_and_loses_nothing(smoke):
+    s, root = smoke["scene"], smoke["root"]
+    x0, x1, y0, y1 = s.sampling_region
+    before = read_dump(root / "settle" / "settled.dump").atoms
+    after = read_dump(root / "run" / "final.dump").atoms
+    in_region = lambda a: ((a.x > x0) & (a.x < x1)).sum()  # noqa: E731
+    assert in_region(before) == 0 and in_region(after) >= 20
+    assert len(after) == len(before) and smoke["spread"]["lost"] == 0
+    # nothing below the substrate: every centre at least half a radius above it
+    b = substrate_height(root / "meshes" / "substrate.stl")(after.x, after.y)
+    assert np.all(after.z - b > 0.5 * after.radius)
+    # the spread layer is one to three particles thick
+    layer = after[(after.x > x0) & (after.x < x1)]
+    assert layer.z.max() < s.roller_gap + 0.1e-3
+
+
+def test_time_step_is_the_configured_fraction_of_the_rayleigh_time(smoke, config):
+    h = smoke["spread"]
+    assert h["rayleigh_fraction"] == pytest.approx(config["timestep"]["rayleigh_fraction"], rel=1e-3)
+    assert h["rayleigh_fraction"] <= config["timestep"]["max_rayleigh_fraction"]
+    assert h["hertz_fraction"] < 0.2
+
+
+def test_settled_bed_solid_fraction_is_that_of_poured_spheres(smoke):
+    """Solid fraction inside the settled heap, by Monte Carlo points, in 0.55-0.64."""
+    s = smoke["scene"]
+    atoms = read_dump(smoke["root"] / "settle" / "settled.dump").atoms
+    xyz, r, width = atoms[["x", "y", "z"]].to_numpy(), atoms.radius.to_numpy(), s.strip_width
+    # periodic images across y, then points in the heap's core (away from its free surface and the substrate)
+    images = np.concatenate([xyz + [0, dy, 0] for dy in (-width, 0, width)])
+    radii = np.tile(r, 3)
+    core_x = np.quantile(xyz[:, 0], [0.4, 0.6])          # the heap's thickest part
+    rng = np.random.default_rng(0)
+    pts = np.column_stack([rng.uniform(*core_x, 40000), rng.uniform(0, width, 40000),
+                           rng.uniform(0.1e-3, 0.45e-3, 40000)])   # above the substrate's peaks, below the slope
+    near = cKDTree(images).query(pts, k=12)
+    inside = np.any(near[0] < radii[near[1]], axis=1)
+    assert 0.55 <= inside.mean() <= 0.64
+
+
+def test_restitution_and_free_fall_time(config, tmp_path):
+    s = scene(config, "smoke")
+    d, height = 175e-6, 1e-3
+    trace = drop_sphere(s, tmp_path, d, height, 0.02)
+    bounce = first_bounce(trace["t"], trace["z"], trace["vz"], d / 2)
+    assert bounce["restitution"] == pytest.approx(config["material"]["restitution"], rel=0.03)
+    assert bounce["impact_time"] == pytest.approx(free_fall_time(height), rel=0.01)
+    assert bounce["v_in"] == pytest.approx((2 * 9.81 * height) ** 0.5, rel=0.01)
+
+
+def test_repeated_seed_is_refused_before_liggghts_runs(tmp_path):
+    text = ("fix pts1 all particletemplate/sphere 15485863 atom_type 1\n"
+            "fix ins all insert/pack seed 15485863 distributiontemplate pdd\n")
+    with pytest.raises(LiggghtsError, match="used twice"):
+        check_seeds(text)
+    with pytest.raises(LiggghtsError, match="not a prime"):
+        check_seeds("fix pts1 all particletemplate/sphere 12345 atom_type 1\n")
+
+
+def test_liggghts_error_names_the_error_and_the_input_line(tmp_path):
+    (tmp_path / "bad.in").write_text("units si\natom_style granular\nregion r block 0 1 0 1 0 1\n"
+                                     "create_box 1 r\nfix broken all no_such_style 1 2 3\nrun 10\n")
+    with pytest.raises(LiggghtsError) as err:
+        run(tmp_path / "bad.in", tmp_path / "bad.log")
+    message = str(err.value)
+    assert "ERROR" in message and "no_such_style" in message
+
+
+def test_read_log_parses_thermo_and_insertions():
+    log = ("INFO: Particle insertion ins: inserted 400 particle templates (mass 5e-06) at step 1\n"
+           "    Step    Atoms         KinEng            rke          ts[1]          ts[2]            CPU \n"
+           "       1      400  1.8e-16              0              0.2              0.05              0 \n"
+           "WARNING: something\n"
+           "    1000      400  7.2e-10              0      0.2    0.06    0.05 \n"
+           "Loop time of 0.05 on 1 procs for 1000 steps with 400 atoms\n")
+    parsed = read_log(log)
+    assert parsed["inserted"] == 400 and parsed["atoms_final"] == 400
+    assert len(parsed["thermo"]) == 2 and parsed["max_hertz_fraction"] == pytest.approx(0.06)
+    assert parsed["warnings"] == ["WARNING: something"]
