@@ -1,0 +1,271 @@
+"""Figures of the surrogate: regressed surfaces, parity plots and the process map.
+
+Reproduces the paper's Figures 6-9 (a: the regressed surface of each metric
+over the spreader speeds with the training runs in blue and the test runs in
+black; b, c: simulated against predicted values with the correlation
+coefficient R) and Figure 10 (the spreading process map: the defect index
+R_q/max(R_q) * Phi/max(Phi) against the throughput index
+Q_s/max(Q_s) * M_s/max(M_s), with iso-U and iso-omega lines of the
+surrogate).  Figures are drawn on matplotlib's Agg canvas (pyplot is never
+imported, so no display is needed) and written as PNG and SVG.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from analysis.surrogate import (INPUTS, METRICS, atomic_path, hybrid_indices, inputs_of,
+                                metric_maxima, pearson_r, predict_frame, predict_grid)
+
+#: Axis labels with units (matplotlib mathtext).
+LABELS = {
+    "U_mm_s": "$U$ (mm/s)",
+    "omega_rad_s": r"$\omega$ (rad/s)",
+    "mass_g": "$M_s$ (g)",
+    "throughput_mm2_s": "$Q_s$ (mm$^2$/s)",
+    "roughness_um": r"$R_q$ ($\mu$m)",
+    "porosity_pct": r"$\Phi$ (%)",
+}
+TITLES = {
+    "mass_g": "Powder mass in the sampling region",
+    "throughput_mm2_s": "Spread throughput",
+    "roughness_um": "Spread layer roughness",
+    "porosity_pct": "Spread layer porosity",
+}
+FORMATS = ("png", "svg")
+_STYLE = {"font.size": 11, "axes.titlesize": 12, "axes.labelsize": 11, "savefig.dpi": 150}
+_TRAIN, _TEST = "blue", "black"
+
+
+def _figure(**kwargs):
+    fig = Figure(**kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_figure(fig, outdir, stem):
+    """Write ``fig`` as ``<outdir>/<stem>.png`` and ``.svg`` (atomically); return the paths."""
+    paths = []
+    for fmt in FORMATS:
+        path = Path(outdir) / f"{stem}.{fmt}"
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format=fmt)
+        paths.append(path)
+    return paths
+
+
+def surface_figure(model, df, split, metric, n=41):
+    """The regressed surface of one metric over (omega, U), as the paper's Figures 6-9 (a).
+
+    Parameters
+    ----------
+    model : estimator
+        Fitted surrogate.
+    df : pandas.DataFrame
+        The simulated runs (speeds and metrics).
+    split : (array of int, array of int)
+        Row positions of the training and test runs.
+    metric : str
+        One of :data:`analysis.surrogate.METRICS`.
+    n : int
+        Surface grid points per axis, over the runs' speed range.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    X = inputs_of(df)
+    grid = predict_grid(model, (X[:, 0].min(), X[:, 0].max()), (X[:, 1].min(), X[:, 1].max()), n)
+    shape = (n, n)
+    U, omega, Z = (grid[c].to_numpy().reshape(shape) for c in ("U_mm_s", "omega_rad_s", metric))
+
+    fig = _figure(figsize=(8.0, 6.5))
+    ax = fig.add_subplot(projection="3d")
+    ax.set_box_aspect(None, zoom=0.85)
+    surf = ax.plot_surface(omega, U, Z, cmap="turbo", alpha=0.8, linewidth=0,
+                           antialiased=True, rasterized=True)
+    for rows, colour, label in ((split[0], _TRAIN, "training runs"), (split[1], _TEST, "test runs")):
+        ax.scatter(X[rows, 1], X[rows, 0], df[metric].to_numpy(float)[rows], color=colour,
+                   s=22, depthshade=False, label=f"{label} ({len(rows)})")
+    ax.set_xlabel(LABELS["omega_rad_s"], labelpad=8)
+    ax.set_ylabel(LABELS["U_mm_s"], labelpad=8)
+    ax.zaxis.set_rotate_label(False)
+    ax.set_zlabel(LABELS[metric], labelpad=12, rotation=90)
+    ax.view_init(elev=25, azim=-125)
+    ax.set_title(f"{TITLES[metric]}: regressed surface")
+    ax.legend(loc="upper left", fontsize=9)
+    fig.colorbar(surf, ax=ax, shrink=0.6, pad=0.02, label=LABELS[metric])
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.04, top=0.94)
+    return fig
+
+
+def parity_figure(df, predicted, split, metric):
+    """Simulated against predicted values of one metric, training and test (Figures 6-9 b, c).
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        The simulated runs.
+    predicted : numpy.ndarray, shape (n, 4)
+        Surrogate predictions for the runs, columns in METRICS order.
+    split : (array of int, array of int)
+        Row positions of the training and test runs.
+    metric : str
+        One of METRICS.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two panels, each with the 1:1 line and R in its title.
+    """
+    j = list(METRICS).index(metric)
+    sim, pred = df[metric].to_numpy(float), predicted[:, j]
+    lo, hi = min(sim.min(), pred.min()), max(sim.max(), pred.max())
+    pad = 0.05 * (hi - lo or 1.0)
+    fig = _figure(figsize=(10.0, 4.8), layout="constrained")
+    for ax, rows, colour, name in zip(fig.subplots(1, 2), split, (_TRAIN, _TEST),
+                                      ("Training", "Test")):
+        r = pearson_r(sim[rows, None], pred[rows, None])[0]
+        ax.plot([lo - pad, hi + pad], [lo - pad, hi + pad], color="0.5", lw=1, label="1:1")
+        ax.scatter(sim[rows], pred[rows], color=colour, s=25, label=f"{len(rows)} runs")
+        ax.set(xlim=(lo - pad, hi + pad), ylim=(lo - pad, hi + pad), aspect="equal",
+               xlabel=f"simulated {LABELS[metric]}", ylabel=f"predicted {LABELS[metric]}",
+               title=f"{name}: R = {r:.3f}")
+        ax.legend(loc="upper left")
+    fig.suptitle(TITLES[metric])
+    return fig
+
+
+def process_map_lines(model, U_values, omega_values, maxima, n=101):
+    """Iso-U and iso-omega lines of the surrogate in hybrid-index space.
+
+    Parameters
+    ----------
+    model : estimator
+        Fitted surrogate.
+    U_values, omega_values : sequence of float
+        The swept speeds (mm/s, rad/s); one line per value, running over the
+        range of the other speed.
+    maxima : dict
+        Metric maxima to normalise by (:func:`analysis.surrogate.metric_maxima`).
+    n : int
+        Points per line.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``family`` ('U' or 'omega'), ``value`` (the fixed speed),
+        U_mm_s, omega_rad_s, the metrics, ``throughput_index``, ``defect_index``.
+    """
+    U_values, omega_values = np.asarray(U_values, float), np.asarray(omega_values, float)
+    sweep_U = np.linspace(U_values.min(), U_values.max(), n)
+    sweep_omega = np.linspace(omega_values.min(), omega_values.max(), n)
+    U = np.r_[np.repeat(U_values, n), np.tile(sweep_U, omega_values.size)]
+    omega = np.r_[np.tile(sweep_omega, U_values.size), np.repeat(omega_values, n)]
+    lines = predict_frame(model, U, omega)
+    lines.insert(0, "family", np.repeat(["U", "omega"], [U_values.size * n, omega_values.size * n]))
+    lines.insert(1, "value", np.r_[np.repeat(U_values, n), np.repeat(omega_values, n)])
+    lines["throughput_index"], lines["defect_index"] = hybrid_indices(lines, maxima)
+    return lines
+
+
+def process_map_figure(model, df, split, n=101):
+    """The spreading process map of the paper's Figure 10.
+
+    The metric maxima are those of the surrogate on an n x n grid over the
+    swept range; the iso-lines and the simulated runs are normalised by them.
+
+    Parameters
+    ----------
+    model : estimator
+        Fitted surrogate.
+    df : pandas.DataFrame
+        The simulated runs; its distinct U and omega are the iso-line values.
+    split : (array of int, array of int)
+        Row positions of the training and test runs.
+    n : int
+        Grid points per axis and points per line.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    U_values, omega_values = (np.unique(df[c].to_numpy(float)) for c in INPUTS)
+    maxima = metric_maxima(predict_grid(model, (U_values.min(), U_values.max()),
+                                        (omega_values.min(), omega_values.max()), n))
+    lines = process_map_lines(model, U_values, omega_values, maxima, n)
+    runs_t, runs_d = hybrid_indices(df, maxima)
+
+    fig = _figure(figsize=(8.0, 6.5), layout="constrained")
+    ax = fig.add_subplot()
+    # colour, label, where it goes (above the line's end with the least omega /
+    # right of the end with the greatest U), legend entry
+    styles = {"U": ("tab:blue", "U = {:g} mm/s", "omega_rad_s", -1,
+                    dict(xytext=(0, 6), ha="center", va="bottom"), "iso-U lines"),
+              "omega": ("tab:red", "ω = {:g} rad/s", "U_mm_s", 1,
+                        dict(xytext=(6, 0), ha="left", va="center"), "iso-ω lines")}
+    labelled = set()
+    for (family, value), line in lines.groupby(["family", "value"], sort=False):
+        colour, fmt, along, sign, place, legend = styles[family]
+        ax.plot(line["throughput_index"], line["defect_index"], color=colour, lw=1.2,
+                label=None if family in labelled else legend)
+        labelled.add(family)
+        end = line.loc[(sign * line[along]).idxmax()]
+        ax.annotate(fmt.format(value), (end["throughput_index"], end["defect_index"]),
+                    textcoords="offset points", color=colour, fontsize=8, **place)
+    ax.scatter(runs_t[split[0]], runs_d[split[0]], facecolor="white", edgecolor="k", s=28,
+               zorder=3, label="simulated runs (training)")
+    ax.scatter(runs_t[split[1]], runs_d[split[1]], color="k", s=28, zorder=3,
+               label="simulated runs (test)")
+    ax.set_xlabel(r"throughput index  $Q_s/\max(Q_s)\cdot M_s/\max(M_s)$")
+    ax.set_ylabel(r"defect index  $R_q/\max(R_q)\cdot \Phi/\max(\Phi)$")
+    ax.margins(x=0.15, y=0.06)   # room for the line labels
+    ax.set_title("Spreading process map")
+    ax.legend(loc="best", fontsize=9)
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def render_maps(model, df, split, outdir, n=41):
+    """Write every figure: surfaces, parity plots, process map.
+
+    Parameters
+    ----------
+    model : estimator
+        Fitted surrogate.
+    df : pandas.DataFrame
+        The simulated runs it was fitted on.
+    split : (array of int, array of int)
+        Row positions of the training and test runs.
+    outdir : str or pathlib.Path
+        Created if missing.
+    n : int
+        Grid points per axis of the surfaces (the process map uses
+        ``max(n, 101)`` points per line).
+
+    Returns
+    -------
+    list of pathlib.Path
+        ``<metric>_surface.{png,svg}`` and ``<metric>_parity.{png,svg}`` per
+        metric (metric = dataset column, e.g. ``mass_g``), then
+        ``process_map.{png,svg}``.
+    """
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    predicted = model.predict(inputs_of(df))
+    split = tuple(np.asarray(rows, int) for rows in split)
+    paths = []
+    with matplotlib.rc_context(_STYLE):
+        for metric in METRICS:
+            paths += save_figure(surface_figure(model, df, split, metric, n), outdir,
+                                 f"{metric}_surface")
+            paths += save_figure(parity_figure(df, predicted, split, metric), outdir,
+                                 f"{metric}_parity")
+        paths += save_figure(process_map_figure(model, df, split, max(n, 101)), outdir,
+                             "process_map")
+    return paths

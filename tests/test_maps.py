@@ -1,0 +1,92 @@
+"""Figures 6-10: hybrid-index arithmetic, process-map lines, written files."""
+
+import runpy
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analysis.maps import process_map_lines, render_maps
+from analysis.surrogate import (METRICS, hybrid_indices, metric_maxima, predict_grid,
+                                save_surrogate, split_table)
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def test_hybrid_indices_on_a_hand_made_grid():
+    frame = pd.DataFrame({"mass_g": [1.0, 2.0, 4.0], "throughput_mm2_s": [10.0, 5.0, 20.0],
+                          "roughness_um": [3.0, 6.0, 6.0], "porosity_pct": [50.0, 25.0, 100.0]})
+    assert metric_maxima(frame) == {"mass_g": 4.0, "throughput_mm2_s": 20.0,
+                                    "roughness_um": 6.0, "porosity_pct": 100.0}
+    throughput, defect = hybrid_indices(frame)
+    assert throughput == pytest.approx([10 / 20 * 1 / 4, 5 / 20 * 2 / 4, 1.0])
+    assert defect == pytest.approx([3 / 6 * 50 / 100, 6 / 6 * 25 / 100, 1.0])
+    doubled = {m: 2 * v for m, v in metric_maxima(frame).items()}
+    throughput2, defect2 = hybrid_indices(frame, doubled)
+    assert throughput2 == pytest.approx(throughput / 4) and defect2 == pytest.approx(defect / 4)
+
+
+def test_hybrid_indices_refuse_a_non_positive_maximum():
+    frame = pd.DataFrame({m: [1.0, 2.0] for m in METRICS})
+    frame["porosity_pct"] = [-1.0, 0.0]
+    with pytest.raises(ValueError, match="porosity_pct"):
+        hybrid_indices(frame)
+
+
+def test_process_map_lines_meet_at_the_swept_runs(fitted):
+    model = fitted[0]
+    U_values, omega_values = [40, 55, 70, 85, 100], [-20, -15, -10, -5, 0, 5, 10, 15, 20]
+    maxima = metric_maxima(predict_grid(model, (40, 100), (-20, 20), 41))
+    lines = process_map_lines(model, U_values, omega_values, maxima, n=41)
+    assert len(lines) == (5 + 9) * 41
+    iso_U = lines[lines.family == "U"]
+    assert (iso_U["U_mm_s"] == iso_U["value"]).all()
+    assert iso_U.groupby("value")["omega_rad_s"].agg(["min", "max"]).values.tolist() == [[-20, 20]] * 5
+    # The iso-U line U = 85 and the iso-omega line omega = -5 cross at (85, -5).
+    a = iso_U[(iso_U.value == 85) & np.isclose(iso_U.omega_rad_s, -5)]
+    iso_w = lines[lines.family == "omega"]
+    b = iso_w[(iso_w.value == -5) & np.isclose(iso_w.U_mm_s, 85)]
+    assert len(a) == len(b) == 1
+    assert a[["throughput_index", "defect_index"]].values == pytest.approx(
+        b[["throughput_index", "defect_index"]].values)
+    # Normalised by the grid maxima, which the lines cannot exceed.
+    assert lines["throughput_index"].max() <= 1 + 1e-9
+
+
+def _check_figures(paths, outdir):
+    expected = {f"{m}_{kind}.{ext}" for m in METRICS for kind in ("surface", "parity")
+                for ext in ("png", "svg")} | {"process_map.png", "process_map.svg"}
+    assert {p.name for p in paths} == expected
+    assert {p.name for p in Path(outdir).iterdir()} == expected        # no temporaries
+    for path in paths:
+        data = path.read_bytes()
+        if path.suffix == ".png":
+            assert data.startswith(PNG_MAGIC) and len(data) > 20_000, path.name
+        else:
+            assert b"<svg" in data[:2000] and len(data) > 20_000, path.name
+
+
+def test_render_maps_writes_every_figure(fitted, dataset, tmp_path):
+    model, scores = fitted
+    split = (scores["split"]["train"], scores["split"]["test"])
+    paths = render_maps(model, dataset, split, tmp_path / "maps", n=21)
+    _check_figures(paths, tmp_path / "maps")
+    # Labels carry units.
+    svg = (tmp_path / "maps" / "throughput_mm2_s_parity.svg").read_text()
+    assert "Training: R = " in svg and "Test: R = " in svg
+
+
+def test_render_maps_script(fitted, dataset, tmp_path, fake_snakemake):
+    model, scores = fitted
+    dataset.to_csv(tmp_path / "dataset.csv", index=False)
+    save_surrogate(model, tmp_path / "model.joblib", scores)
+    split_table(dataset, scores["split"]["train"], scores["split"]["test"]).to_csv(
+        tmp_path / "split.csv", index=False)
+    smk = fake_snakemake({"model": str(tmp_path / "model.joblib"),
+                                  "dataset": str(tmp_path / "dataset.csv"),
+                                  "split": str(tmp_path / "split.csv")},
+                           {"maps": str(tmp_path / "maps")})
+    runpy.run_path(str(smk.scriptdir / "render_maps.py"), init_globals={"snakemake": smk})
+    paths = sorted((tmp_path / "maps").iterdir())
+    _check_figures(paths, tmp_path / "maps")

@@ -1,0 +1,171 @@
+"""The surrogate of section 2.3: split, accuracy, scores, convergence, persistence."""
+
+import json
+import runpy
+from pathlib import Path
+
+import joblib
+import numpy as np
+import pandas as pd
+import pytest
+import sklearn
+from conftest import synthetic_dataset
+from sklearn.exceptions import ConvergenceWarning
+
+from analysis.surrogate import (DEFAULT_SURROGATE, METRICS, R_TARGET, deviation_from_paper,
+                                fit_surrogate, hybrid_indices, inputs_of, load_surrogate,
+                                predict_grid, read_split, regression_scores, save_surrogate,
+                                split_runs, split_table)
+
+
+def test_split_is_35_10_seeded_and_reproducible(dataset):
+    train, test = split_runs(dataset, 10, 0)
+    assert (len(train), len(test)) == (35, 10)
+    assert sorted(np.r_[train, test]) == list(range(45))
+    again = split_runs(dataset, 10, 0)
+    assert np.array_equal(train, again[0]) and np.array_equal(test, again[1])
+    assert not np.array_equal(test, split_runs(dataset, 10, 1)[1])
+
+
+@pytest.mark.parametrize("n_test", [0, 45, 50])
+def test_split_rejects_impossible_test_size(dataset, n_test):
+    with pytest.raises(ValueError, match=f"n_test={n_test}"):
+        split_runs(dataset, n_test, 0)
+
+
+def test_surrogate_reaches_the_papers_accuracy(fitted):
+    _, scores = fitted
+    assert scores["fit"]["converged"]
+    assert scores["split"]["n_train"] == 35 and scores["split"]["n_test"] == 10
+    for metric in METRICS:
+        assert scores["test"][metric]["R"] >= R_TARGET, metric
+        assert scores["train"][metric]["R"] >= R_TARGET, metric
+        assert scores["test"][metric]["MAPE_pct"] < 5.0, metric
+        assert scores["cv"][metric]["R2"] > 0.9, metric
+    assert scores["warnings"] == []
+
+
+def test_scores_structure_and_json(fitted, dataset):
+    _, scores = fitted
+    assert {"sklearn_version", "n_runs", "inputs", "metrics", "params", "deviation_from_paper",
+            "fit", "split", "input_range", "swept", "train", "test", "cv", "cv_settings",
+            "mape_note", "warnings"} <= scores.keys()
+    for part in ("train", "test", "cv"):
+        assert set(scores[part]) == set(METRICS)
+        for values in scores[part].values():
+            assert set(values) == {"R", "R2", "MAPE_pct", "n_nonzero"}
+    assert scores["split"]["seed"] == 0
+    assert scores["split"]["test"] == split_runs(dataset, 10, 0)[1].tolist()
+    assert scores["input_range"] == {"U_mm_s": [40.0, 100.0], "omega_rad_s": [-20.0, 20.0]}
+    assert scores["cv_settings"]["folds"] == 5
+    assert scores["params"]["n_init"] == 3
+    json.dumps(scores, allow_nan=False)          # strictly valid JSON
+
+
+def test_papers_literal_adam_setting_does_not_converge(dataset):
+    """Why the default deviates: adam at learning rate 1e-4 in 200 epochs."""
+    literal = {**DEFAULT_SURROGATE, "solver": "adam", "learning_rate_init": 1e-4, "max_iter": 200}
+    with pytest.warns(ConvergenceWarning, match="did not converge"):
+        _, scores = fit_surrogate(dataset, literal)
+    assert scores["fit"]["converged"] is False
+    assert scores["fit"]["n_iter"] == 200
+    assert "Maximum iterations (200) reached" in scores["fit"]["convergence_warnings"][0]
+    assert scores["cv_settings"]["converged"] is False
+    assert min(s["R"] for s in scores["test"].values()) < R_TARGET
+    assert any("roughness_um" in w and "under-fits" in w for w in scores["warnings"])
+    assert "as the paper's Table 2" in scores["deviation_from_paper"]
+
+
+def test_default_deviation_is_stated():
+    text = deviation_from_paper(DEFAULT_SURROGATE)
+    assert "solver='lbfgs'" in text and "adam" in text and "does not converge" in text
+
+
+def test_regression_scores_mape_skips_zero_truth():
+    y_true = np.repeat([[0.0], [2.0], [4.0]], 4, axis=1)
+    y_pred = np.repeat([[1.0], [3.0], [4.0]], 4, axis=1)
+    scores = regression_scores(y_true, y_pred)
+    for values in scores.values():
+        assert values["MAPE_pct"] == pytest.approx(25.0)   # (1/2 + 0/4) / 2
+        assert values["n_nonzero"] == 2
+        assert values["R"] == pytest.approx(np.corrcoef([0, 2, 4], [1, 3, 4])[0, 1])
+    constant = regression_scores(y_true, np.ones_like(y_true))
+    assert constant["mass_g"]["R"] is None                    # undefined, not NaN
+
+
+def test_fit_rejects_missing_values(dataset, fit_params):
+    broken = dataset.copy()
+    broken.loc[7, "porosity_pct"] = np.nan
+    with pytest.raises(ValueError, match=r"rows \[7\]"):
+        fit_surrogate(broken, fit_params)
+
+
+def test_save_load_roundtrip(fitted, dataset, tmp_path):
+    model, scores = fitted
+    path = tmp_path / "model.joblib"
+    save_surrogate(model, path, scores)
+    loaded, meta = load_surrogate(path)
+    X = inputs_of(dataset)
+    assert np.array_equal(loaded.predict(X), model.predict(X))
+    assert meta["sklearn_version"] == sklearn.__version__
+    assert meta["metrics"]["roughness_um"] == {"symbol": "R_q", "unit": "um"}
+    assert meta["split"]["test"] == scores["split"]["test"]
+    assert list(tmp_path.iterdir()) == [path]                 # no temporary left
+
+
+def test_load_warns_when_sklearn_version_differs(fitted, tmp_path, monkeypatch):
+    path = tmp_path / "model.joblib"
+    monkeypatch.setattr(sklearn, "__version__", "0.0.1")
+    save_surrogate(fitted[0], path, fitted[1])
+    monkeypatch.undo()
+    with pytest.warns(UserWarning, match=rf"scikit-learn 0\.0\.1 .*{sklearn.__version__}"):
+        load_surrogate(path)
+
+
+def test_load_rejects_a_foreign_file(tmp_path):
+    path = tmp_path / "other.joblib"
+    joblib.dump({"model": None}, path)
+    with pytest.raises(ValueError, match="not a spreadmap surrogate"):
+        load_surrogate(path)
+
+
+def test_predict_grid_covers_the_range_with_indices(fitted):
+    grid = predict_grid(fitted[0], (40, 100), (-20, 20), 5)
+    assert len(grid) == 25
+    assert list(grid.columns) == ["U_mm_s", "omega_rad_s", *METRICS,
+                                  "throughput_index", "defect_index"]
+    assert sorted(grid["U_mm_s"].unique()) == [40, 55, 70, 85, 100]
+    assert sorted(grid["omega_rad_s"].unique()) == [-20, -10, 0, 10, 20]
+    t, d = hybrid_indices(grid)
+    assert np.allclose(grid["throughput_index"], t) and np.allclose(grid["defect_index"], d)
+    assert grid["throughput_index"].max() <= 1.0 and grid["defect_index"].max() <= 1.0
+
+
+def test_split_table_roundtrip(dataset, tmp_path):
+    train, test = split_runs(dataset, 10, 3)
+    path = tmp_path / "split.csv"
+    split_table(dataset, train, test).to_csv(path, index=False)
+    back = read_split(path, dataset)
+    assert np.array_equal(back[0], train) and np.array_equal(back[1], test)
+    with pytest.raises(ValueError, match="does not match"):
+        read_split(path, dataset.iloc[::-1])
+
+
+def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
+    synthetic_dataset(0, noise=0.01).to_csv(tmp_path / "dataset.csv", index=False)
+    out = {name: str(tmp_path / "surrogate" / file) for name, file in
+           (("model", "model.joblib"), ("scores", "scores.json"), ("split", "split.csv"),
+            ("grid", "grid.csv"))}
+    smk = fake_snakemake({"dataset": str(tmp_path / "dataset.csv")}, out,
+                         {"surrogate": {**fit_params, "grid_points": 11}, "grid_points": 11})
+    runpy.run_path(str(smk.scriptdir / "fit_surrogate.py"), init_globals={"snakemake": smk})
+
+    scores = json.loads(Path(out["scores"]).read_text())
+    assert min(s["R"] for s in scores["test"].values()) >= R_TARGET
+    split = pd.read_csv(out["split"])
+    assert split["set"].value_counts().to_dict() == {"train": 35, "test": 10}
+    grid = pd.read_csv(out["grid"])
+    assert len(grid) == 121 and grid["throughput_index"].max() == pytest.approx(1.0)
+    model, meta = load_surrogate(out["model"])
+    assert meta["split"]["test"] == split.index[split["set"] == "test"].tolist()
+    assert "converged" in (tmp_path / "rule.log").read_text()
