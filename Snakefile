@@ -1,0 +1,34 @@
+# spreadmap: DEM spreading simulations (LIGGGHTS) -> layer metrics -> surrogate -> process maps.
+# The method is Desai & Higgs' spreading process maps; see README.md.
+import sys
+
+from snakemake.utils import min_version, validate
+
+min_version("9.0")
+sys.path.insert(0, workflow.basedir)
+from analysis.config import coerce_cli_values  # noqa: E402
+
+
+configfile: "config.yaml"
+
+
+config.update(coerce_cli_values(config))  # --config values arrive as strings
+validate(config, "analysis/schemas/config.schema.yaml")
+
+
+include: "rules/common.smk"
+include: "rules/geometry.smk"
+include: "rules/simulate.smk"
+include: "rules/metrics.smk"
+include: "rules/surrogate.smk"
+include: "rules/maps.smk"
+
+
+rule all:
+    input:
+        f"{OUT}/dataset.csv",
+        f"{OUT}/surrogate/scores.json",
+        f"{OUT}/surrogate/grid.csv",
+        f"{OUT}/maps",
+        expand(f"{OUT}/runs/{{run}}/final.vtp", run=RUNS),
+        TOP_VIEWS,

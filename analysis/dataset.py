@@ -1,0 +1,52 @@
+"""The Design of Simulations' dataset: one row per run (speeds, the four layer
+metrics, extras, cost and health), refusing any run whose health is unsound."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from analysis.simulate import MAX_OVERLAP
+
+METRICS = ["mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"]
+HEALTH = ["atoms", "lost", "through_substrate", "max_overlap_fraction", "kinetic_energy_J", "steps",
+          "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m"]
+
+
+class UnsoundRunError(ValueError):
+    """A run's health or metrics rule it out of the dataset."""
+
+
+def check_run(row: dict) -> None:
+    """Raise :class:`UnsoundRunError` naming the run and what is wrong with it."""
+    problems = [f"{key} = {row[key]}" for key in ("lost", "through_substrate") if row[key]]
+    if row["max_overlap_fraction"] > MAX_OVERLAP:
+        problems.append(f"max_overlap_fraction = {row['max_overlap_fraction']:.3f} > {MAX_OVERLAP}")
+    problems += [f"{key} is not finite" for key in METRICS if row[key] is None or not np.isfinite(row[key])]
+    if row["n_particles"] == 0:
+        problems.append("no particle in the sampling region (empty layer)")
+    if problems:
+        raise UnsoundRunError(f"run U={row['U_mm_s']:g} mm/s, omega={row['omega_rad_s']:g} rad/s, "
+                              f"replicate {row['replicate']}: " + "; ".join(problems))
+
+
+def build_dataset(metrics_files, health_files, benchmark_files, out) -> pd.DataFrame:
+    """Join per-run ``metrics.json``, ``health.json`` and Snakemake benchmark
+    TSVs (same order) into ``out`` (CSV, written atomically)."""
+    rows = []
+    for metrics, health, bench in zip(metrics_files, health_files, benchmark_files, strict=True):
+        row = json.loads(Path(metrics).read_text())
+        h = json.loads(Path(health).read_text())
+        row.update({key: h.get(key) for key in HEALTH})
+        b = pd.read_csv(bench, sep="\t").iloc[-1]
+        row.update({"cpu_s": float(b["cpu_time"]), "max_rss_MB": float(b["max_rss"])})
+        check_run(row)
+        rows.append(row)
+    table = pd.DataFrame(rows).sort_values(["U_mm_s", "omega_rad_s", "replicate"], ignore_index=True)
+    tmp = Path(f"{out}.tmp")
+    table.to_csv(tmp, index=False)
+    os.replace(tmp, out)
+    return table

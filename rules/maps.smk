@@ -1,0 +1,40 @@
+rule maps:
+    """Figures 6-10: regressed surfaces, parity plots, the hybrid process map."""
+    input:
+        model=rules.surrogate.output.model,
+        dataset=rules.dataset.output[0],
+        split=rules.surrogate.output.split,
+    output:
+        report(directory(f"{OUT}/maps"), patterns=["{name}.png"], category="Process maps"),
+    log:
+        f"{LOGS}/maps.log",
+    benchmark:
+        f"{BENCH}/maps.tsv"
+    script:
+        "../scripts/render_maps.py"
+
+
+rule vtk:
+    """Each run's final state as VTK polydata, for ParaView."""
+    input:
+        rules.spread.output.dump,
+    output:
+        f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/final.vtp",
+    log:
+        f"{LOGS}/vtk/U{{U}}_w{{omega}}_r{{rep}}.log",
+    script:
+        "../scripts/write_vtk.py"
+
+
+rule top_view:
+    """Top view of the sampling region, particles coloured by size (Figure 4)."""
+    input:
+        rules.spread.output.dump,
+    output:
+        report(f"{OUT}/top_views/U{{U}}_w{{omega}}_r{{rep}}.png", category="Top views"),
+    params:
+        region=SCENE.sampling_region,
+    log:
+        f"{LOGS}/top_view/U{{U}}_w{{omega}}_r{{rep}}.log",
+    script:
+        "../scripts/top_view.py"

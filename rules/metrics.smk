@@ -1,0 +1,29 @@
+rule layer_metrics:
+    """The paper's eqs. 1-7 from the final dump, by the virtual profilometer."""
+    input:
+        dump=rules.spread.output.dump,
+        substrate=rules.geometry.output.substrate,
+    output:
+        f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/metrics.json",
+    params:
+        level=LEVEL,
+    log:
+        f"{LOGS}/metrics/U{{U}}_w{{omega}}_r{{rep}}.log",
+    benchmark:
+        f"{BENCH}/metrics/U{{U}}_w{{omega}}_r{{rep}}.tsv"
+    script:
+        "../scripts/layer_metrics.py"
+
+
+rule dataset:
+    """One row per run: speeds, the four metrics, extras, cost and health."""
+    input:
+        metrics=expand(f"{OUT}/runs/{{run}}/metrics.json", run=RUNS),
+        health=expand(f"{OUT}/runs/{{run}}/health.json", run=RUNS),
+        benchmarks=expand(f"{BENCH}/spread/{{run}}.tsv", run=RUNS),
+    output:
+        report(f"{OUT}/dataset.csv", category="Dataset"),
+    log:
+        f"{LOGS}/dataset.log",
+    script:
+        "../scripts/dataset.py"

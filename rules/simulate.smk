@@ -1,0 +1,44 @@
+rule settle:
+    """Insert the heap and let it come to rest, once per replicate; every run starts here."""
+    input:
+        substrate=rules.geometry.output.substrate,
+    output:
+        restart=f"{OUT}/settle/r{{rep}}/settled.restart",
+        dump=f"{OUT}/settle/r{{rep}}/settled.dump",
+        health=f"{OUT}/settle/r{{rep}}/health.json",
+    params:
+        level=LEVEL,
+    threads: SCENE.mpi_ranks
+    resources:
+        mpi=SCENE.mpi_ranks,
+        tasks=SCENE.mpi_ranks,
+    log:
+        f"{LOGS}/settle/r{{rep}}.log",
+    benchmark:
+        f"{BENCH}/settle/r{{rep}}.tsv"
+    script:
+        "../scripts/settle.py"
+
+
+rule spread:
+    """One spreading pass at U [mm/s] and omega [rad/s] from the settled heap."""
+    input:
+        substrate=rules.geometry.output.substrate,
+        roller_shell=rules.geometry.output.roller_shell,
+        restart=f"{OUT}/settle/r{{rep}}/settled.restart",
+        settled=f"{OUT}/settle/r{{rep}}/settled.dump",
+    output:
+        dump=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/final.dump",
+        health=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/health.json",
+    params:
+        level=LEVEL,
+    threads: SCENE.mpi_ranks
+    resources:
+        mpi=SCENE.mpi_ranks,
+        tasks=SCENE.mpi_ranks,
+    log:
+        f"{LOGS}/spread/U{{U}}_w{{omega}}_r{{rep}}.log",
+    benchmark:
+        f"{BENCH}/spread/U{{U}}_w{{omega}}_r{{rep}}.tsv"
+    script:
+        "../scripts/spread.py"
