@@ -18,6 +18,8 @@ from analysis.simulate import make_geometry, settle, spread, substrate_height  #
 
 from tests.test_config import ROOT  # noqa: E402
 
+pytestmark = pytest.mark.xdist_group("liggghts_smoke")
+
 U_MM_S, OMEGA = 100.0, -5.0
 
 

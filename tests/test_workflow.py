@@ -1,0 +1,101 @@
+"""The whole workflow on the smoke level through real LIGGGHTS: config to maps
+and report, then a sweep extended and interrupted, resumed without redoing
+finished runs."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.test_config import ROOT
+
+pytestmark = pytest.mark.xdist_group("workflow")
+
+OMEGAS = [-10, 0, 10]
+FIRST_U = [85, 100]
+
+
+def snakemake_cmd(workdir, U, *extra):
+    sweep = json.dumps({"U_mm_s": U, "omega_rad_s": OMEGAS, "replicates": 1})
+    return [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-d", str(workdir),
+            "--configfile", str(ROOT / "config.yaml"), "--cores", "2", "--rerun-incomplete",
+            "--config", "level=smoke", f"sweep={sweep}", 'surrogate={"n_test": 2, "cv_folds": 3}', *extra]
+
+
+@pytest.fixture(scope="module")
+def workflow(tmp_path_factory):
+    workdir = tmp_path_factory.mktemp("workflow")
+    proc = subprocess.run(snakemake_cmd(workdir, FIRST_U), capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return workdir
+
+
+def test_dataset_has_one_sane_row_per_run(workflow):
+    data = pd.read_csv(workflow / "results/smoke/dataset.csv")
+    assert len(data) == len(FIRST_U) * len(OMEGAS)
+    assert sorted(zip(data.U_mm_s, data.omega_rad_s)) == sorted((u, w) for u in FIRST_U for w in OMEGAS)
+    for col in ["mass_g", "throughput_mm2_s", "roughness_um", "thickness_um", "n_particles"]:
+        assert np.all(np.isfinite(data[col])) and np.all(data[col] > 0), col
+    assert np.all((data.porosity_pct > 0) & (data.porosity_pct < 100))
+    assert np.all((data.coverage > 0) & (data.coverage <= 1))
+    assert np.all(data.lost == 0) and np.all(data.through_substrate == 0)
+    # eq. 5: Q_s = U thk_avg
+    assert np.allclose(data.throughput_mm2_s, data.U_mm_s * data.thickness_um * 1e-3)
+    assert np.all(data.wall_s > 0) and np.all(data.steps > 0)
+
+
+def test_surrogate_scores_maps_and_grid_are_made(workflow):
+    out = workflow / "results/smoke"
+    scores = json.loads((out / "surrogate/scores.json").read_text())
+    for part in ("train", "test", "cv"):
+        assert set(scores[part]) == {"mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"}
+    assert scores["split"]["n_test"] == 2 and scores["split"]["n_train"] == 4
+    grid = pd.read_csv(out / "surrogate/grid.csv")
+    assert {"U_mm_s", "omega_rad_s", "throughput_index", "defect_index"} <= set(grid.columns)
+    for name in ["process_map", "mass_g_surface", "porosity_pct_parity"]:
+        assert (out / "maps" / f"{name}.png").stat().st_size > 5000
+        assert (out / "maps" / f"{name}.svg").exists()
+    # Figure 4's top views: fastest U, the swept omegas nearest -5, 0 and +5 rad/s
+    assert {p.stem for p in out.glob("top_views/*.png")} == {"U100_w-10_r0", "U100_w0_r0"}
+    assert len(list(out.glob("runs/*/final.vtp"))) == len(FIRST_U) * len(OMEGAS)
+    assert len(list((workflow / "results/benchmarks/smoke/spread").glob("*.tsv"))) == 6
+
+
+def test_report_gathers_figures(workflow):
+    proc = subprocess.run(snakemake_cmd(workflow, FIRST_U, "--report", "results/smoke/report.html"),
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert (workflow / "results/smoke/report.html").stat().st_size > 100_000
+
+
+def test_extended_sweep_interrupted_then_resumed_runs_only_what_is_missing(workflow):
+    runs = workflow / "results/smoke/runs"
+    finished = {p.parent.name: p.stat().st_mtime_ns for p in runs.glob("*/health.json")}
+    U = [70] + FIRST_U
+    killed = subprocess.Popen(snakemake_cmd(workflow, U), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)
+    deadline = time.time() + 600
+    while time.time() < deadline and not list(runs.glob("U70_*/health.json")):
+        time.sleep(1)
+    os.killpg(killed.pid, signal.SIGKILL)      # a crash: no clean-up at all
+    killed.wait()
+    done_before_resume = {p.parent.name for p in runs.glob("U70_*/health.json")}
+    assert 1 <= len(done_before_resume) < 3
+    # an interrupted run left no result that looks finished
+    for run in runs.glob("U70_*"):
+        assert (run / "final.dump").exists() == (run / "health.json").exists()
+
+    subprocess.run([*snakemake_cmd(workflow, U), "--unlock"], capture_output=True, check=True)
+    proc = subprocess.run(snakemake_cmd(workflow, U), capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    spread_jobs = proc.stderr.count("rule spread:") + proc.stdout.count("rule spread:")
+    assert spread_jobs == 3 - len(done_before_resume)
+    after = {p.parent.name: p.stat().st_mtime_ns for p in runs.glob("*/health.json")}
+    assert all(after[name] == mtime for name, mtime in finished.items())   # finished runs untouched
+    assert len(pd.read_csv(workflow / "results/smoke/dataset.csv")) == 9
