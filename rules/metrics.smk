@@ -27,3 +27,15 @@ rule dataset:
         f"{LOGS}/dataset.log",
     script:
         "../scripts/dataset.py"
+
+
+rule trends:
+    """The paper's section-3 trends beside this dataset's (Markdown table)."""
+    input:
+        rules.dataset.output[0],
+    output:
+        report(f"{OUT}/trends.md", category="Dataset"),
+    log:
+        f"{LOGS}/trends.log",
+    script:
+        "../scripts/trends.py"

@@ -1,0 +1,60 @@
+"""The paper's section-3 statements, checked against a dataset.
+
+``python -m analysis.trends results/default/dataset.csv`` prints a Markdown
+table: the paper's statement beside what this dataset shows.
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pandas as pd
+
+ROLLER_RADIUS_MM = 15.0
+
+
+def trend_table(data: pd.DataFrame) -> list[tuple[str, str, str]]:
+    """(paper's statement, measured here, agrees?) rows, from replicate means."""
+    mean = data.groupby(["U_mm_s", "omega_rad_s"], as_index=False).mean(numeric_only=True)
+    rows = []
+    neg, pos = mean[mean.omega_rad_s < 0], mean[mean.omega_rad_s > 0]
+    for col, name in (("mass_g", "M_s"), ("throughput_mm2_s", "Q_s")):
+        ratio = neg[col].mean() / pos[col].mean()
+        rows.append((f"{name} jumps when omega turns negative (multi-layer deposition)",
+                     f"mean {name} at omega < 0 is {ratio:.2f} x that at omega > 0", "yes" if ratio > 1.1 else "no"))
+    by_omega = mean.pivot(index="U_mm_s", columns="omega_rad_s", values="throughput_mm2_s")
+    rising = np.mean([np.all(np.diff(by_omega[w].to_numpy()) > 0) for w in by_omega.columns])
+    corr = mean[["U_mm_s", "throughput_mm2_s"]].corr(method="spearman").iloc[0, 1]
+    rows.append(("Q_s grows monotonically with U", f"monotonic in U at {rising:.0%} of the omegas; "
+                 f"Spearman rho(U, Q_s) = {corr:.2f}", "yes" if rising >= 0.8 else "partly" if corr > 0.5 else "no"))
+    rough = mean.pivot(index="U_mm_s", columns="omega_rad_s", values="roughness_um")
+    argmin = rough.idxmin(axis=1)
+    near_zero = np.mean(np.abs(argmin.to_numpy()) <= 5)
+    rows.append(("R_q is lowest at omega = 0 for every U",
+                 "omega of least R_q per U: " + ", ".join(f"{u:g}: {w:g}" for u, w in argmin.items()),
+                 "yes" if near_zero == 1 else "partly" if near_zero >= 0.5 else "no"))
+    rows.append(("R_q rises more for negative than positive omega",
+                 f"mean R_q at omega < 0: {neg.roughness_um.mean():.1f} um, at omega > 0: {pos.roughness_um.mean():.1f} um",
+                 "yes" if neg.roughness_um.mean() > pos.roughness_um.mean() else "no"))
+    por = mean.pivot(index="U_mm_s", columns="omega_rad_s", values="porosity_pct")
+    bottom = mean.U_mm_s + mean.omega_rad_s * ROLLER_RADIUS_MM
+    at_rest = mean.loc[(bottom.abs() <= 25)]
+    peak = mean.loc[mean.porosity_pct.idxmax()]
+    rows.append(("Phi peaks where the roller's bottom point is at rest (U = -omega R)",
+                 f"max Phi {peak.porosity_pct:.1f} % at U = {peak.U_mm_s:g} mm/s, omega = {peak.omega_rad_s:g} rad/s "
+                 f"(bottom speed {peak.U_mm_s + peak.omega_rad_s * ROLLER_RADIUS_MM:+.0f} mm/s); mean Phi where "
+                 f"bottom speed within 25 mm/s: {at_rest.porosity_pct.mean():.1f} %, elsewhere {mean.porosity_pct.mean():.1f} %",
+                 "yes" if abs(peak.U_mm_s + peak.omega_rad_s * ROLLER_RADIUS_MM) <= 25 else "no"))
+    rising_phi = np.mean([np.all(np.diff(por[w].to_numpy()) > 0) for w in por.columns])
+    rows.append(("Phi increases monotonically with U at constant omega",
+                 f"monotonic at {rising_phi:.0%} of the omegas", "yes" if rising_phi >= 0.8 else "no"))
+    return rows
+
+
+def markdown(rows) -> str:
+    lines = ["| paper (section 3) | this dataset | agrees |", "|---|---|---|"]
+    return "\n".join(lines + [f"| {a} | {b} | {c} |" for a, b, c in rows])
+
+
+if __name__ == "__main__":
+    print(markdown(trend_table(pd.read_csv(sys.argv[1]))))
