@@ -216,6 +216,8 @@ class Scene:
     rest_speed: float       # RMS speed [m/s] below which particles are at rest
     profilometer_lines: int
     mpi_ranks: int
+    runtime_min: int | None      # cluster wall-clock limit of a settle or spread job [min]; None: the cluster's
+    mem_mb_per_rank: int | None  # cluster memory per MPI rank [MB]; None: the cluster's
     substrate: dict
     substrate_x: tuple      # (xlo, xhi) the substrate must cover: the whole box [m]
     rough_x: tuple          # (xlo, xhi) where the substrate is rough (around the sampling region) [m]
@@ -265,6 +267,7 @@ def scene(config: dict, level: str | None = None) -> Scene:
         settle_time=lvl["settle_time_s"], rest_time=lvl["rest_time_s"],
         rest_speed=config["rest_rms_speed_mm_s"] * mm,
         profilometer_lines=lvl["profilometer_lines"], mpi_ranks=lvl["mpi_ranks"],
+        runtime_min=lvl.get("runtime_min"), mem_mb_per_rank=lvl.get("mem_mb_per_rank"),
         substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
                    "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "stl": sub["stl"]},
         rough_x=(sample_x0 - 0.5 * mm, sample_x1 + 0.5 * mm),

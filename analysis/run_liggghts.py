@@ -66,10 +66,21 @@ def check_seeds(text: str) -> list[int]:
 
 
 def mpi_command(ranks: int) -> list[str]:
-    """The launcher prefix for ``ranks`` MPI ranks (none for one rank)."""
+    """The launcher prefix for ``ranks`` MPI ranks (none for one rank).
+
+    The launcher is the environment variable ``SPREADMAP_MPI_LAUNCHER``, read at
+    each call, default ``mpirun``; it may carry options, split on whitespace
+    (``"srun --mpi=pmix"``). Open MPI's ``mpirun`` or ``mpiexec`` gets ``-np N``,
+    plus ``--allow-run-as-root`` as root and ``--oversubscribe`` for more ranks
+    than cores. Any other launcher gets ``-n N``: ``srun`` inside a SLURM job
+    (``profiles/slurm`` sets it) starts the ranks on the job's nodes itself.
+    """
     if ranks <= 1:
         return []
-    cmd = ["mpirun", "-np", str(ranks)]
+    launcher = os.environ.get("SPREADMAP_MPI_LAUNCHER", "").split() or ["mpirun"]
+    if Path(launcher[0]).name not in ("mpirun", "mpiexec"):
+        return launcher + ["-n", str(ranks)]
+    cmd = launcher + ["-np", str(ranks)]
     if os.geteuid() == 0:
         cmd.append("--allow-run-as-root")
     if ranks > (os.cpu_count() or 1):

@@ -10,8 +10,11 @@ rule settle:
         level=LEVEL,
     threads: SCENE.mpi_ranks
     resources:
-        mpi=SCENE.mpi_ranks,
+        mpi=SCENE.mpi_ranks if SCENE.mpi_ranks > 1 else None,  # SLURM plugin: mpi means tasks > 1
         tasks=SCENE.mpi_ranks,
+        runtime=SCENE.runtime_min,
+        mem_mb=SCENE.mem_mb_per_rank * SCENE.mpi_ranks if SCENE.mem_mb_per_rank else None,
+        mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
     log:
         f"{LOGS}/settle/r{{rep}}.log",
     benchmark:
@@ -34,8 +37,11 @@ rule spread:
         level=LEVEL,
     threads: SCENE.mpi_ranks
     resources:
-        mpi=SCENE.mpi_ranks,
+        mpi=SCENE.mpi_ranks if SCENE.mpi_ranks > 1 else None,  # SLURM plugin: mpi means tasks > 1
         tasks=SCENE.mpi_ranks,
+        runtime=SCENE.runtime_min,
+        mem_mb=SCENE.mem_mb_per_rank * SCENE.mpi_ranks if SCENE.mem_mb_per_rank else None,
+        mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
     log:
         f"{LOGS}/spread/U{{U}}_w{{omega}}_r{{rep}}.log",
     benchmark:
