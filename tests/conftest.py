@@ -102,3 +102,10 @@ def fake_snakemake(tmp_path):
                                config=yaml.safe_load((root / "config.yaml").read_text()),
                                scriptdir=root / "scripts")
     return make
+
+
+@pytest.fixture(scope="session")
+def config():
+    """The shipped config.yaml, loaded and checked."""
+    from analysis.config import load_config
+    return load_config(Path(__file__).resolve().parent.parent / "config.yaml")

@@ -11,11 +11,6 @@ from tests.test_config import ROOT
 
 
 @pytest.fixture(scope="module")
-def config():
-    return load_config(ROOT / "config.yaml")
-
-
-@pytest.fixture(scope="module")
 def meshes(config, tmp_path_factory):
     out = tmp_path_factory.mktemp("meshes")
     summary = make_geometry(config, "default", out)

@@ -24,11 +24,6 @@ U_MM_S, OMEGA = 100.0, -5.0
 
 
 @pytest.fixture(scope="module")
-def config():
-    return load_config(ROOT / "config.yaml")
-
-
-@pytest.fixture(scope="module")
 def smoke(config, tmp_path_factory):
     """Geometry, a settled heap and one spreading pass at U = 100 mm/s, omega = -5 rad/s."""
     root = tmp_path_factory.mktemp("smoke")
