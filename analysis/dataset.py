@@ -12,7 +12,7 @@ import pandas as pd
 from analysis.simulate import MAX_OVERLAP
 
 METRICS = ["mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"]
-HEALTH = ["atoms", "lost", "through_substrate", "max_overlap_fraction", "kinetic_energy_J", "steps",
+HEALTH = ["heap_exhausted", "particles_ahead_of_roller", "atoms", "lost", "through_substrate", "max_overlap_fraction", "kinetic_energy_J", "steps",
           "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m"]
 
 
@@ -21,13 +21,16 @@ class UnsoundRunError(ValueError):
 
 
 def check_run(row: dict) -> None:
-    """Raise :class:`UnsoundRunError` naming the run and what is wrong with it."""
+    """Raise :class:`UnsoundRunError` naming the run and what is wrong with it.
+
+    An empty sampling region is refused unless the heap was exhausted (then it
+    is a measurement of no powder: the row keeps ``heap_exhausted`` = True)."""
     problems = [f"{key} = {row[key]}" for key in ("lost", "through_substrate") if row[key]]
     if row["max_overlap_fraction"] > MAX_OVERLAP:
         problems.append(f"max_overlap_fraction = {row['max_overlap_fraction']:.3f} > {MAX_OVERLAP}")
     problems += [f"{key} is not finite" for key in METRICS if row[key] is None or not np.isfinite(row[key])]
-    if row["n_particles"] == 0:
-        problems.append("no particle in the sampling region (empty layer)")
+    if row["n_particles"] == 0 and not row["heap_exhausted"]:
+        problems.append("no particle in the sampling region (empty layer) with powder still ahead of the roller")
     if problems:
         raise UnsoundRunError(f"run U={row['U_mm_s']:g} mm/s, omega={row['omega_rad_s']:g} rad/s, "
                               f"replicate {row['replicate']}: " + "; ".join(problems))

@@ -182,6 +182,15 @@ def _publish(out: Path, summary: dict, *names: str) -> None:
     os.replace(out / "health.json.part", out / "health.json")
 
 
+def heap_supply(atoms, s: Scene) -> dict:
+    """Powder left ahead of the roller when it stops. None left means the heap
+    ran out before the roller reached the end of the sampling region (forward
+    rolling lays several layers and eats a small heap): the layer there is
+    supply-limited, its M_s and Q_s lower bounds of the scene's physics."""
+    ahead = int((atoms["x"].to_numpy() > s.travel_end).sum())
+    return {"particles_ahead_of_roller": ahead, "heap_exhausted": ahead == 0}
+
+
 def _check_timestep(log: dict, s: Scene) -> None:
     if log["max_rayleigh_fraction"] > s.max_rayleigh_fraction * (1 + 1e-6):
         raise LiggghtsError(f"time step is {log['max_rayleigh_fraction']:.3f} of the Rayleigh time, above "
@@ -264,6 +273,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     _check_timestep(log, s)
     atoms = read_dump(out / "final.dump.part").atoms
     health = layer_health(atoms, s, meshes / "substrate.stl", len(atoms0))
+    health.update(heap_supply(atoms, s))
     thermo = log["thermo"]
     summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"],
                "steps": int(thermo["Step"].iloc[-1] - thermo["Step"].iloc[0]), "timestep_s": s.timestep,
