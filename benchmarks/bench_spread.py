@@ -41,7 +41,7 @@ def main(levels):
                             f"{r['wall_s']:.1f} | {r['particle_steps_per_s']:.3g} |")
             print("\n".join(rows[-3:]), flush=True)
     text = (f"# Cost of one spreading run\n\nMeasured {time.strftime('%Y-%m-%d')} on {platform.machine()}, "
-            f"{cpu_model()}, 1 core per run (LIGGGHTS {Path('/usr/share/doc/liggghts').exists() and '3.8.0'}), "
+            f"{cpu_model()}, one run at a time on one core (LIGGGHTS 3.8.0, Debian), "
             f"by `.venv/bin/python benchmarks/bench_spread.py {' '.join(levels)}`.\n\n" + "\n".join(rows) + "\n")
     out = ROOT / "benchmarks/results/spread_cost.md"
     out.write_text(text)
