@@ -1,5 +1,5 @@
 # spreadmap: DEM spreading simulations (LIGGGHTS) -> layer metrics -> surrogate -> process maps.
-# The method is Desai & Higgs' spreading process maps; see README.md.
+# The method is the paper's spreading process maps (Figures 6-10); see README.md.
 import sys
 
 from snakemake.utils import min_version, validate

@@ -62,10 +62,10 @@ def dataset():
 
 @pytest.fixture(scope="session")
 def fit_params():
-    """config.yaml's surrogate section with alpha 0.01.
+    """The surrogate settings with alpha 0.01, as config.yaml.
 
-    On this paper-like set alpha 0.1 (the config's value) under-fits: test R
-    down to 0.90 over seeds; alpha 0.01 gives R >= 0.98 (see the report).
+    On this paper-like set alpha 0.1 (the paper's lambda, read literally)
+    under-fits: test R down to 0.90 over seeds; alpha 0.01 gives R >= 0.98.
     """
     from analysis.surrogate import DEFAULT_SURROGATE
     return {**DEFAULT_SURROGATE, "alpha": 0.01}
