@@ -11,7 +11,7 @@ top, metrics), best of a few runs; peak memory is the peak of memory traced
 by ``tracemalloc`` (NumPy's allocations included) in a separate run. The
 requirement is the 100k-particle, 1000 x 1000-probe case under 3 s on one
 core. Prints a Markdown table and writes it, with the machine, to
-``benchmarks/results/layer_metrics.md``; exits 1 if the requirement fails.
+``benchmarks/measured/layer_metrics.md``; exits 1 if the requirement fails.
 """
 
 import datetime

@@ -4,7 +4,7 @@ Usage: .venv/bin/python benchmarks/bench_spread.py [LEVEL ...]   (default: smoke
 
 For each level: make the geometry, settle the heap, spread it once at
 U = 70 mm/s with omega = 0 and -10 rad/s (rotation costs extra); writes a
-Markdown table with machine and date to benchmarks/results/spread_cost.md.
+Markdown table with machine and date to benchmarks/measured/spread_cost.md.
 """
 import platform
 import sys
@@ -43,7 +43,7 @@ def main(levels):
     text = (f"# Cost of one spreading run\n\nMeasured {time.strftime('%Y-%m-%d')} on {platform.machine()}, "
             f"{cpu_model()}, one run at a time on one core (LIGGGHTS 3.8.0, Debian), "
             f"by `.venv/bin/python benchmarks/bench_spread.py {' '.join(levels)}`.\n\n" + "\n".join(rows) + "\n")
-    out = ROOT / "benchmarks/results/spread_cost.md"
+    out = ROOT / "benchmarks/measured/spread_cost.md"
     out.write_text(text)
     print(f"wrote {out}")
 
