@@ -44,7 +44,7 @@ CASES = [
     (100_000, 2000, "flat"),
     (100_000, 1000, "stl"),
 ]
-OUT = ROOT / "benchmarks" / "results" / "layer_metrics.md"
+OUT = ROOT / "benchmarks" / "measured" / "layer_metrics.md"
 
 
 def polydisperse_layer(n, seed=0):
