@@ -223,6 +223,16 @@ class Scene:
     rough_x: tuple          # (xlo, xhi) where the substrate is rough (around the sampling region) [m]
     box: tuple              # (xlo, xhi, ylo, yhi, zlo, zhi) of the simulation box [m]
 
+    @property
+    def mean_particle_mass(self) -> float:
+        """Number-mean particle mass [kg]."""
+        return self.density * number_mean_volume(self.diameters, self.mass_fractions)
+
+
+def number_mean_volume(diameters, mass_fractions) -> float:
+    """Number-mean particle volume [m^3] of size classes weighted by mass."""
+    return float(1.0 / np.sum(np.asarray(mass_fractions) / (pi / 6 * np.asarray(diameters) ** 3)))
+
 
 def scene(config: dict, level: str | None = None) -> Scene:
     """Resolve fidelity level ``level`` (default ``config['level']``) into a :class:`Scene`."""
@@ -236,7 +246,7 @@ def scene(config: dict, level: str | None = None) -> Scene:
                                        lvl["size_classes"])
     width = lvl["strip_width_mm"] * mm
     heap_length = lvl["heap_length_mm"] * mm
-    mean_volume = 1.0 / np.sum(fractions / (pi / 6 * diameters**3))  # number-mean particle volume
+    mean_volume = number_mean_volume(diameters, fractions)
     heap_height = lvl["heap_particles"] * mean_volume / (INSERTION_SOLID_FRACTION * width * heap_length)
     gap = roller["gap_um"] * um
     radius = roller["diameter_mm"] * mm / 2

@@ -64,10 +64,9 @@ REST_CHUNK_S = 0.005  # [s] between two at-rest checks
 
 def rest_loop(s: Scene, n_particles: int, max_time: float) -> dict:
     """Template values for ``_until_rest.j2``: chunks of REST_CHUNK_S up to ``max_time``."""
-    mean_mass = s.density / np.sum(np.array(s.mass_fractions) / (np.pi / 6 * np.array(s.diameters) ** 3))
     chunk = THERMO_EVERY * max(1, round(REST_CHUNK_S / s.timestep / THERMO_EVERY))
     return {"chunk_steps": chunk, "max_chunks": max(1, ceil(max_time / (chunk * s.timestep))),
-            "rest_speed": s.rest_speed, "rest_ke": 0.5 * n_particles * mean_mass * s.rest_speed**2}
+            "rest_speed": s.rest_speed, "rest_ke": 0.5 * n_particles * s.mean_particle_mass * s.rest_speed**2}
 
 
 def binsize(s: Scene) -> float:
