@@ -218,6 +218,7 @@ class Scene:
     mpi_ranks: int
     runtime_min: int | None      # cluster wall-clock limit of a settle or spread job [min]; None: the cluster's
     mem_mb_per_rank: int | None  # cluster memory per MPI rank [MB]; None: the cluster's
+    checkpoints_per_run: int     # restart files written over a spread's travel (0: none)
     substrate: dict
     substrate_x: tuple      # (xlo, xhi) the substrate must cover: the whole box [m]
     rough_x: tuple          # (xlo, xhi) where the substrate is rough (around the sampling region) [m]
@@ -278,6 +279,7 @@ def scene(config: dict, level: str | None = None) -> Scene:
         rest_speed=config["rest_rms_speed_mm_s"] * mm,
         profilometer_lines=lvl["profilometer_lines"], mpi_ranks=lvl["mpi_ranks"],
         runtime_min=lvl.get("runtime_min"), mem_mb_per_rank=lvl.get("mem_mb_per_rank"),
+        checkpoints_per_run=lvl.get("checkpoints_per_run", 0),
         substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
                    "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "stl": sub["stl"]},
         rough_x=(sample_x0 - 0.5 * mm, sample_x1 + 0.5 * mm),

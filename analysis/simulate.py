@@ -13,8 +13,10 @@ Command line (the workflow's rules call the same functions)::
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
+import shutil
 import sys
 from math import ceil
 from pathlib import Path
@@ -38,6 +40,9 @@ BELOW_SUBSTRATE_RADII = 0.5
 #: harder (20 % seen at U = 40 mm/s); past 50 % spheres pass through each other.
 MAX_OVERLAP = 0.05
 MAX_OVERLAP_ANYWHERE = 0.5
+#: Largest share of the heap that may roll ahead, to the sampling region, while
+#: it slumps; these strays are removed before the spread (more: a scene error).
+MAX_STRAYS = 0.01
 #: Length [m] over which the rough substrate ramps to flat outside the sampling region.
 ROUGH_TAPER = 0.5e-3
 
@@ -199,16 +204,24 @@ def _check_timestep(log: dict, s: Scene) -> None:
 # --------------------------------------------------------------------------
 # Settle and spread
 
-def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, replicate: int = 0) -> dict:
+def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, replicate: int = 0,
+           max_steps: int | None = None) -> dict:
     """Insert the heap and let it settle on the substrate; writes ``settled.restart``,
-    ``settled.dump``, ``settle.in``, ``settle.log`` and ``health.json`` into ``outdir``."""
+    ``settled.dump``, ``settle.in``, ``settle.log`` and ``health.json`` into ``outdir``.
+
+    ``max_steps`` cuts each settling phase to that many steps: a start-up check
+    of a big scene (benchmarks/bench_scaling.py), not a settled heap."""
     s, out, meshes = scene(config, level), Path(outdir), Path(meshes).resolve()
     out.mkdir(parents=True, exist_ok=True)
     if s.timestep > s.max_rayleigh_fraction * s.rayleigh_time:
         raise LiggghtsError(f"time step {s.timestep:.3g} s exceeds the allowed fraction of the Rayleigh time")
     text = render("settle.in.j2", s=s, contact=contact_model(s), seeds=seeds(config, s, replicate), box=[f"{v:.6g}" for v in s.box],
-                  skin=skin(s), binsize=binsize(s), thermo_every=THERMO_EVERY, **rest_loop(s, s.heap_particles, s.settle_time),
-                  substrate_stl=meshes / "substrate.stl", restart="settled.restart.part", dump="settled.dump.part")
+                  processors=processors_grid(s),
+                  skin=skin(s), binsize=binsize(s), thermo_every=THERMO_EVERY,
+                  **(rest_loop(s, s.heap_particles, s.settle_time) if max_steps is None else
+                     {**rest_loop(s, s.heap_particles, s.settle_time), "chunk_steps": max_steps, "max_chunks": 1}),
+                  substrate_stl=meshes / "substrate.stl", restart="settled.restart.part", dump="settled.dump.part",
+                  stray_x=s.sampling_region[0] - max(s.diameters), max_strays=MAX_STRAYS)
     (out / "settle.in").write_text(text)
     log = run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks)
     _check_timestep(log, s)
@@ -216,12 +229,15 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
         raise LiggghtsError(f"inserted {log['inserted']} of {s.heap_particles} particles: the heap region is too "
                             "small for heap_particles (see fidelity level)")
     atoms = read_dump(out / "settled.dump.part").atoms
-    health = layer_health(atoms, s, meshes / "substrate.stl", s.heap_particles)
-    toe = float(atoms["x"].max() + atoms["radius"].max())
-    if toe >= s.sampling_region[0]:
-        raise LiggghtsError(f"the settled heap reaches x = {toe * 1e3:.2f} mm, into the sampling region "
-                            f"(from {s.sampling_region[0] * 1e3:.2f} mm): raise fidelity.{level}.sampling_start_mm")
-    health["heap_toe_m"] = toe
+    before_strays = int(log["thermo"]["Atoms"].iloc[-2])  # the last row is the `run 0` after delete_atoms
+    strays = before_strays - len(atoms)
+    if strays > MAX_STRAYS * s.heap_particles:
+        raise LiggghtsError(f"{strays} of {s.heap_particles} particles rolled ahead of the slumped heap into the "
+                            f"sampling region (from {s.sampling_region[0] * 1e3:.2f} mm; at most "
+                            f"{MAX_STRAYS:.0%} may): raise fidelity.{level}.sampling_start_mm or heap_length_mm")
+    health = layer_health(atoms, s, meshes / "substrate.stl", s.heap_particles - strays)
+    health["strays_removed"] = strays
+    health["heap_toe_m"] = float(atoms["x"].max() + atoms["radius"].max())
     summary = {"wall_s": log["wall_s"], "steps": int(log["thermo"]["Step"].iloc[-1]),
                "timestep_s": s.timestep, "rayleigh_fraction": log["max_rayleigh_fraction"],
                "hertz_fraction": log["max_hertz_fraction"], "inserted": log["inserted"], **health}
@@ -242,12 +258,61 @@ def roller_start(atoms, s: Scene, clearance: float | None = None) -> float:
     return float(np.min(atoms["x"].to_numpy() - np.sqrt(reach**2 - dz**2)))
 
 
+CHECKPOINT_DIR = "checkpoint"
+
+
+def processors_grid(s: Scene) -> str:
+    """LIGGGHTS ``processors`` grid for ``s.mpi_ranks`` ranks.
+
+    The powder is a thin bed under a box as tall as the roller, so z is never
+    split. LIGGGHTS 3.8 has no load balancing (no ``balance`` command), and
+    along the travel the particles crowd into the heap: a cut across x leaves
+    ranks idle. A narrow periodic strip is uniform across its width, so it is
+    cut across y into equal shares, each at least the ghost cutoff (largest
+    diameter + skin) wide; a wide scene (the paper level) lets LIGGGHTS
+    choose the grid in x and y.
+    """
+    slab = max(s.diameters) + skin(s)  # the ghost cutoff
+    if s.mpi_ranks <= 1:
+        return "1 1 1"
+    if s.strip_width / s.mpi_ranks >= slab and s.strip_width < 0.1 * (s.box[1] - s.box[0]):
+        return f"1 {s.mpi_ranks} 1"
+    return "* * 1"
+
+
+def _checkpoints(out: Path, fingerprint: str) -> list[tuple[int, Path]]:
+    """(step, restart file) of an earlier, killed attempt at this same input, newest first."""
+    folder = out / CHECKPOINT_DIR
+    stamp = folder / "input.sha256"
+    if not stamp.is_file() or stamp.read_text() != fingerprint:
+        return []
+    found = [(int(p.name.split(".")[1]), p) for p in folder.glob("travel.*.restart")]
+    return sorted(found, reverse=True)
+
+
+def checkpoint_plan(travel_steps: int, count: int, resume_step: int = 0) -> list[tuple[int, int | None]]:
+    """(step, previous checkpoint's step) of the checkpoints still to write after ``resume_step``:
+    ``count`` evenly spaced over the travel (none at its end)."""
+    if not count:
+        return []
+    every = ceil(travel_steps / (count + 1))
+    steps = [k * every for k in range(1, count + 1) if resume_step < k * every < travel_steps]
+    return list(zip(steps, [resume_step or None] + steps[:-1]))
+
+
 def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: str | Path,
            settled: str | Path, outdir: str | Path, movie_every: int = 0) -> dict:
     """Spread the settled heap at ``U_mm_s`` [mm/s] and ``omega_rad_s`` [rad/s].
 
     Writes ``spread.in``, ``spread.log``, ``final.dump`` and ``health.json``
     into ``outdir`` and returns the health figures (with wall time and steps).
+
+    With ``checkpoints_per_run`` > 0 in the fidelity level, LIGGGHTS writes
+    restart files to ``outdir/checkpoint/`` during the travel; a later call
+    for the same input (same rendered text) resumes from the newest one that
+    loads, e.g. after a cluster's time limit killed the job. Continuing the
+    roller's motion from a restart is LIGGGHTS' own (``fix move/mesh`` stores
+    it); a checkpoint that fails to load is skipped, and the run starts over.
     """
     s, out = scene(config, level), Path(outdir)
     meshes, settled = Path(meshes).resolve(), Path(settled).resolve()
@@ -260,27 +325,55 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     if x0 - s.roller_radius <= s.box[0]:
         raise LiggghtsError(f"roller start x = {x0:.4g} m puts the roller outside the box (x >= {s.box[0]:.4g} m)")
     travel_time = (s.travel_end - x0) / speed
+    travel_steps = ceil(travel_time / s.timestep)
     motion = roller_motion(speed, omega_rad_s, s.roller_radius)
-    text = render("spread.in.j2", s=s, contact=contact_model(s), box=[f"{v:.6g}" for v in s.box], U_mm_s=U_mm_s, omega_rad_s=omega_rad_s, motion=motion,
-                  restart=settled / "settled.restart", skin=skin(s), binsize=binsize(s), thermo_every=THERMO_EVERY,
-                  substrate_stl=meshes / "substrate.stl", roller_stl=meshes / "roller_shell.stl",
-                  roller_x=x0, roller_z=s.roller_gap + s.roller_radius,
-                  travel_steps=ceil(travel_time / s.timestep), **rest_loop(s, len(atoms0), s.rest_time),
-                  movie_every=movie_every, movie="movie.dump", dump="final.dump.part")
-    (out / "spread.in").write_text(text)
-    log = run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks)
+    context = dict(s=s, contact=contact_model(s), box=[f"{v:.6g}" for v in s.box], U_mm_s=U_mm_s,
+                   omega_rad_s=omega_rad_s, motion=motion, restart=settled / "settled.restart", skin=skin(s),
+                   binsize=binsize(s), thermo_every=THERMO_EVERY, processors=processors_grid(s),
+                   substrate_stl=meshes / "substrate.stl", roller_stl=meshes / "roller_shell.stl",
+                   roller_z=s.roller_gap + s.roller_radius, travel_steps=travel_steps,
+                   **rest_loop(s, len(atoms0), s.rest_time), movie_every=movie_every, movie="movie.dump",
+                   dump="final.dump.part", checkpoint_dir=CHECKPOINT_DIR,
+                   checkpoint_every=ceil(travel_steps / (s.checkpoints_per_run + 1)))
+
+    def render_from(step: int, restart: Path | None) -> str:
+        """The input starting at ``step`` of the travel (0: from the settled heap)."""
+        elapsed = step * s.timestep
+        return render("spread.in.j2", resume=restart, resume_step=step, sfx="_resumed" if step else "",
+                      roller_x=x0 + speed * elapsed, roller_angle_deg=np.degrees(abs(omega_rad_s) * elapsed) % 360,
+                      checkpoints=checkpoint_plan(travel_steps, s.checkpoints_per_run, step), **context)
+
+    fresh = render_from(0, None)
+    fingerprint = hashlib.sha256(fresh.encode()).hexdigest()
+    for step, restart in _checkpoints(out, fingerprint) + [(0, None)]:
+        if restart is None:  # a fresh start: forget any other input's checkpoints
+            shutil.rmtree(out / CHECKPOINT_DIR, ignore_errors=True)
+            (out / CHECKPOINT_DIR).mkdir()
+            (out / CHECKPOINT_DIR / "input.sha256").write_text(fingerprint)
+        (out / "spread.in").write_text(fresh if restart is None else render_from(step, restart))
+        try:
+            log = run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks)
+            break
+        except LiggghtsError as err:
+            if restart is None:
+                raise
+            print(f"warning: resuming from {restart} failed, trying an older checkpoint or a fresh start:\n{err}",
+                  file=sys.stderr)
     _check_timestep(log, s)
     atoms = read_dump(out / "final.dump.part").atoms
     health = layer_health(atoms, s, meshes / "substrate.stl", len(atoms0))
     health.update(heap_supply(atoms, s))
     thermo = log["thermo"]
+    first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
     summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"],
-               "steps": int(thermo["Step"].iloc[-1] - thermo["Step"].iloc[0]), "timestep_s": s.timestep,
-               "roller_start_m": x0, "roller_travel_m": speed * ceil(travel_time / s.timestep) * s.timestep,
+               "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
+               "processors": context["processors"],
+               "roller_start_m": x0, "roller_travel_m": speed * travel_steps * s.timestep,
                "rayleigh_fraction": log["max_rayleigh_fraction"], "hertz_fraction": log["max_hertz_fraction"],
-               "particle_steps_per_s": len(atoms) * (thermo["Step"].iloc[-1] - thermo["Step"].iloc[0]) / log["wall_s"],
+               "particle_steps_per_s": len(atoms) * (last - first) / log["wall_s"],
                **health}
     _publish(out, summary, "final.dump")
+    shutil.rmtree(out / CHECKPOINT_DIR, ignore_errors=True)
     return summary
 
 

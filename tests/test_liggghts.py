@@ -2,6 +2,10 @@
 reaches the engine in the right units, and failures are loud."""
 import json
 import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +18,8 @@ from analysis.config import load_config, scene  # noqa: E402
 from analysis.drop_test import drop_sphere, first_bounce, free_fall_time  # noqa: E402
 from analysis.dump import read_dump  # noqa: E402
 from analysis.run_liggghts import LiggghtsError, check_seeds, read_log, run  # noqa: E402
-from analysis.simulate import make_geometry, settle, spread, substrate_height  # noqa: E402
+from analysis.simulate import (checkpoint_plan, make_geometry, processors_grid, settle, spread,  # noqa: E402
+                               substrate_height)
 
 from tests.test_config import ROOT  # noqa: E402
 
@@ -140,3 +145,53 @@ def test_read_log_parses_thermo_and_insertions():
     assert parsed["inserted"] == 400 and parsed["atoms_final"] == 400
     assert len(parsed["thermo"]) == 2 and parsed["max_hertz_fraction"] == pytest.approx(0.06)
     assert parsed["warnings"] == ["WARNING: something"]
+
+
+def test_killed_spread_resumes_from_its_newest_checkpoint(smoke, config):
+    """SIGKILL a spread (the scheduler's time limit) after its second checkpoint:
+    the next call resumes there, the roller ends where the uninterrupted run's
+    did, and nothing is lost."""
+    root, s = smoke["root"], smoke["scene"]
+    out = root / "killed"
+    cmd = [sys.executable, "-m", "analysis.simulate", "spread", "--level", "smoke", "--U", str(U_MM_S),
+           "--omega", str(OMEGA), "--meshes", str(root / "meshes"), "--settled", str(root / "settle"),
+           "--out", str(out)]
+    job = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                           start_new_session=True)
+    travel_steps = max(int(p.stem.split("_")[1]) for p in (root / "run").glob("roller_*.vtk"))
+    plan = checkpoint_plan(travel_steps, s.checkpoints_per_run)
+    second = out / "checkpoint" / f"travel.{plan[1][0]}.restart"
+    deadline = time.time() + 300
+    while time.time() < deadline and not second.exists():
+        time.sleep(0.2)
+    time.sleep(0.5)
+    os.killpg(job.pid, signal.SIGKILL)
+    job.wait()
+    assert not (out / "health.json").exists() and not (out / "final.dump").exists()
+    # the older checkpoint was removed once the newer was written
+    assert not (out / "checkpoint" / f"travel.{plan[0][0]}.restart").exists()
+    resumed = spread(config, "smoke", U_MM_S, OMEGA, root / "meshes", root / "settle", out)
+    assert resumed["resumed_from_step"] >= plan[1][0]
+    assert resumed["atoms"] == smoke["spread"]["atoms"] and resumed["lost"] == 0
+    assert not (out / "checkpoint").exists()              # cleaned up after success
+    full_end = root / "run" / f"roller_{travel_steps}.vtk"
+    c_full, v_full = roller_state(full_end)
+    c_res, v_res = roller_state(out / full_end.name)
+    assert np.abs(c_res - c_full).max() < 1e-6          # the roller was re-placed where its motion had taken it
+    assert np.abs(v_res - v_full).max() < 1e-5
+
+
+def test_checkpoint_plan_spaces_checkpoints_and_skips_those_passed():
+    assert checkpoint_plan(100, 0) == []
+    assert checkpoint_plan(100, 3) == [(25, None), (50, 25), (75, 50)]
+    assert checkpoint_plan(100, 3, resume_step=50) == [(75, 50)]
+    assert checkpoint_plan(100, 3, resume_step=75) == []
+
+
+def test_processors_grid_cuts_a_strip_across_its_width(config):
+    from dataclasses import replace
+    s = scene(config, "default")
+    assert processors_grid(s) == "1 1 1"
+    assert processors_grid(replace(s, mpi_ranks=2)) == "1 2 1"      # 0.6 mm slabs, cutoff 0.28 mm
+    assert processors_grid(replace(s, mpi_ranks=8)) == "* * 1"      # slabs thinner than the cutoff
+    assert processors_grid(scene(config, "paper")) == "* * 1"       # a wide scene: LIGGGHTS chooses
