@@ -43,6 +43,10 @@ MAX_OVERLAP_ANYWHERE = 0.5
 #: Largest share of the heap that may roll ahead, to the sampling region, while
 #: it slumps; these strays are removed before the spread (more: a scene error).
 MAX_STRAYS = 0.01
+#: The generated substrate's peaks are clipped at this fraction of the roller's
+#: gap (3.4 Sq at the configured 300 um gap and Sq 79 um): otherwise the paper
+#: level's large field puts a node through the roller.
+PEAK_CAP = 0.9
 #: Length [m] over which the rough substrate ramps to flat outside the sampling region.
 ROUGH_TAPER = 0.5e-3
 
@@ -110,7 +114,13 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
         sub = s.substrate
         substrate = geometry.rough_substrate(s.substrate_x, s.strip_width, sub["grid_spacing"],
                                              sub["correlation_length"], sub["sq"], sub["seed"],
-                                             rough_x=s.rough_x, taper=ROUGH_TAPER)
+                                             rough_x=s.rough_x, taper=ROUGH_TAPER,
+                                             peak_cap=PEAK_CAP * s.roller_gap)
+        clipped_sq = geometry.substrate_rms(substrate, s.rough_x)[1]
+        if clipped_sq < 0.99 * sub["sq"]:
+            raise ConfigError(f"config key 'roller.gap_um' = {s.roller_gap * 1e6:g}: the substrate's peaks reach "
+                              f"the roller; clipping them at {PEAK_CAP:g} x the gap would lower Sq from "
+                              f"{sub['sq'] * 1e6:.0f} to {clipped_sq * 1e6:.0f} um")
     peak = substrate.vertices[:, 2].max()
     if peak >= s.roller_gap:
         raise ConfigError(f"config key 'roller.gap_um' = {s.roller_gap * 1e6:g}: the substrate's highest peak "
