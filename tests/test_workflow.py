@@ -19,6 +19,9 @@ pytestmark = pytest.mark.xdist_group("workflow")
 
 OMEGAS = [-10, 0, 10]
 FIRST_U = [85, 100]
+#: 4 x the smoke scene's seed-to-seed standard deviation at U = 100 mm/s, omega = 0
+#: (4 heap packings, benchmarks/measured/noise_smoke.csv), in the dataset's units
+SEED_SPREAD = {"mass_g": 4 * 7e-5, "throughput_mm2_s": 4 * 0.91, "roughness_um": 4 * 3.8, "porosity_pct": 4 * 0.96}
 
 
 def snakemake_cmd(workdir, U, *extra):
@@ -104,3 +107,26 @@ def test_extended_sweep_interrupted_then_resumed_runs_only_what_is_missing(workf
     after = {p.parent.name: p.stat().st_mtime_ns for p in runs.glob("*/health.json")}
     assert all(after[name] == mtime for name, mtime in finished.items())   # finished runs untouched
     assert len(pd.read_csv(workflow / "results/smoke/dataset.csv")) == 9
+
+
+def test_spread_on_two_mpi_ranks_through_the_workflow_matches_one_rank(workflow):
+    """Re-run one smoke spread through Snakemake with `mpi_ranks: 2` (mpirun -np 2,
+    the strip cut across its width) from the same settled heap: the layer's
+    metrics agree with the single-rank run's within the smoke scene's
+    seed-to-seed spread (benchmarks/measured/noise_smoke.md)."""
+    run = workflow / "results/smoke/runs/U100_w0_r0"
+    one = json.loads((run / "metrics.json").read_text())
+    sweep = json.dumps({"U_mm_s": FIRST_U, "omega_rad_s": OMEGAS, "replicates": 1})
+    cmd = [sys.executable, "-m", "snakemake", "results/smoke/runs/U100_w0_r0/metrics.json",
+           "-s", str(ROOT / "Snakefile"), "-d", str(workflow), "--configfile", str(ROOT / "config.yaml"),
+           "--cores", "2", "--forcerun", "spread", "--config", "level=smoke", f"sweep={sweep}",
+           'surrogate={"n_test": 2, "cv_folds": 3}', 'fidelity={"smoke": {"mpi_ranks": 2}}']
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "rule settle:" not in proc.stderr + proc.stdout         # the same settled heap
+    health = json.loads((run / "health.json").read_text())
+    assert health["ranks"] == 2 and health["processors"] == "1 2 1" and health["lost"] == 0
+    assert "1 by 2 by 1 MPI processor grid" in (run / "spread.log").read_text()
+    two = json.loads((run / "metrics.json").read_text())
+    for key, tolerance in SEED_SPREAD.items():
+        assert abs(two[key] - one[key]) <= tolerance, (key, one[key], two[key])
