@@ -1,0 +1,217 @@
+"""Run time against error: one knob at a time, against a reference, through real LIGGGHTS.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_fidelity.py [--level default] [--points 100:-10,100:0,100:10]
+        [--seeds 2] [--variants reference,default,E1e6,...] [--jobs 2] [--name fidelity]
+
+Every variant is the config's fidelity level with a few keys overridden
+(``VARIANTS`` below). For each variant and seed (replicate: another heap
+packing, same physics) it makes the geometry, settles the heap and spreads it
+at each (U [mm/s], omega [rad/s]) point, measures the layer, and records wall
+time, CPU time (LIGGGHTS' own), steps and particles. The error of a variant
+on a metric is the mean over the points of |mean over its seeds - mean over
+the reference's seeds| / mean |reference|; the reference's own seed-to-seed
+spread (its sample standard deviation at each point over the same mean
+reference) is the noise floor no variant can beat.
+
+Writes ``benchmarks/measured/<name>.csv`` (one row per run), ``<name>.md``
+(one row per variant, with machine and date) and ``<name>.png`` (CPU time
+per run against error: the Pareto front). Runs ``--jobs`` scenes at once, so
+compare ratios measured in one invocation.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import platform
+import resource
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+from analysis.config import load_config, scene  # noqa: E402
+from analysis.dump import read_dump  # noqa: E402
+from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
+from analysis.run_liggghts import LiggghtsError  # noqa: E402
+from analysis.simulate import make_geometry, settle, spread  # noqa: E402
+
+METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
+
+#: Config overrides (dotted keys; ``LEVEL`` stands for the benchmarked level's
+#: fidelity block). "default" is the level as configured.
+VARIANTS = {
+    "default": {},
+    "reference": {"material.youngs_modulus_dem_Pa": 2.0e7, "timestep.rayleigh_fraction": 0.1,
+                  "LEVEL.size_classes": 9, "LEVEL.profilometer_lines": 2000},
+    "E2e7": {"material.youngs_modulus_dem_Pa": 2.0e7},
+    "E2e6": {"material.youngs_modulus_dem_Pa": 2.0e6},
+    "E1e6": {"material.youngs_modulus_dem_Pa": 1.0e6},
+    "dt0.1": {"timestep.rayleigh_fraction": 0.1},
+    "dt0.3": {"timestep.rayleigh_fraction": 0.3},
+    "classes3": {"LEVEL.size_classes": 3},
+    "classes9": {"LEVEL.size_classes": 9},
+    "lines200": {"LEVEL.profilometer_lines": 200},
+    "ranks2": {"LEVEL.mpi_ranks": 2},
+    "E1e6+dt0.3": {"material.youngs_modulus_dem_Pa": 1.0e6, "timestep.rayleigh_fraction": 0.3},
+}
+
+
+def variant_config(base: dict, level: str, overrides: dict) -> dict:
+    """A copy of ``base`` with ``overrides`` applied (``LEVEL.`` = ``fidelity.<level>.``)."""
+    config = copy.deepcopy(base)
+    for key, value in overrides.items():
+        node, *path = key.replace("LEVEL.", f"fidelity.{level}.").split(".")
+        target = config[node]
+        for part in path[:-1]:
+            target = target[part]
+        target[path[-1]] = value
+    return config
+
+
+def children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def run_scene(task) -> list[dict]:
+    """Geometry, settle (seed ``replicate``) and every point's spread of one variant."""
+    name, config, level, replicate, points = task
+    s = scene(config, level)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        make_geometry(config, level, tmp / "meshes")
+        try:
+            settle(config, level, tmp / "meshes", tmp / "settle", replicate=replicate)
+        except LiggghtsError as err:  # a broken setting is a result too
+            print(f"{name} seed {replicate}: settle failed: {err}", flush=True)
+            return [{"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
+                     "error": str(err).splitlines()[0]} for U, omega in points]
+        for U, omega in points:
+            cpu0 = children_cpu()
+            try:
+                health = spread(config, level, U, omega, tmp / "meshes", tmp / "settle", tmp / "run")
+            except LiggghtsError as err:
+                print(f"{name} seed {replicate} U={U:g} omega={omega:g}: failed: {err}", flush=True)
+                rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
+                             "cpu_s": children_cpu() - cpu0, "error": str(err).splitlines()[0]})
+                continue
+            cpu = children_cpu() - cpu0
+            metrics = spread_layer_metrics(read_dump(tmp / "run" / "final.dump"), s.sampling_region, U * 1e-3,
+                                           s.density, substrate=tmp / "meshes" / "substrate.stl",
+                                           n_lines=s.profilometer_lines, seed=config["profilometer"]["seed"])
+            rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
+                         "wall_s": health["wall_s"], "cpu_s": cpu, "steps": health["steps"],
+                         "particles": health["atoms"], "timestep_s": health["timestep_s"],
+                         "heap_exhausted": health["heap_exhausted"],
+                         "max_overlap_fraction": health["max_overlap_fraction"],
+                         **{k: to_report_units(metrics)[k] for k in METRICS}})
+            print(f"{name} seed {replicate} U={U:g} omega={omega:g}: {health['wall_s']:.1f} s, "
+                  + ", ".join(f"{METRICS[k]} {rows[-1][k]:.4g}" for k in METRICS), flush=True)
+    return rows
+
+
+def summarise(runs: pd.DataFrame, reference: str) -> pd.DataFrame:
+    """One row per variant: cost per run and relative error per metric against ``reference``."""
+    failed = runs["error"].notna() if "error" in runs else pd.Series(False, index=runs.index)
+    fails = failed.groupby(runs["variant"], sort=False).sum()
+    runs = runs[~failed]
+    means = runs.groupby(["variant", "U_mm_s", "omega_rad_s"])[list(METRICS)].mean()
+    ref = means.loc[reference]
+    scale = ref.abs().mean()
+    rows = []
+    for variant, group in runs.groupby("variant", sort=False):
+        err = (means.loc[variant] - ref).abs().mean() / scale
+        rows.append({"variant": variant, "seeds": group["seed"].nunique(), "runs": len(group),
+                     "failed": int(fails.get(variant, 0)),
+                     "cpu_s_per_run": group["cpu_s"].mean(), "wall_s_per_run": group["wall_s"].mean(),
+                     "steps_per_run": group["steps"].mean(), "particles": int(group["particles"].max()),
+                     **{f"err_{METRICS[k]}": err[k] for k in METRICS}})
+    for variant in fails.index.difference(means.index.get_level_values(0)):  # nothing ran through
+        rows.append({"variant": variant, "failed": int(fails[variant])})
+    table = pd.DataFrame(rows)
+    ref_runs = runs[runs["variant"] == reference]
+    if ref_runs["seed"].nunique() > 1:
+        spread_ = ref_runs.groupby(["U_mm_s", "omega_rad_s"])[list(METRICS)].std().mean() / scale
+        table.loc[len(table)] = {"variant": "noise floor (reference seed-to-seed std)",
+                                 **{f"err_{METRICS[k]}": spread_[k] for k in METRICS}}
+    return table
+
+
+def plot(table: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 4, figsize=(16, 4), sharey=True)
+    rows = table[table["cpu_s_per_run"].notna()]
+    floor = table[table["cpu_s_per_run"].isna()]
+    for ax, metric in zip(axes, METRICS.values()):
+        col = f"err_{metric}"
+        ax.scatter(100 * rows[col], rows["cpu_s_per_run"])
+        for _, r in rows.iterrows():
+            ax.annotate(r["variant"], (100 * r[col], r["cpu_s_per_run"]), fontsize=7)
+        if len(floor):
+            ax.axvline(100 * floor[col].iloc[0], color="grey", ls="--", label="noise floor")
+            ax.legend(fontsize=7)
+        ax.set_xlabel(f"error of {metric} against the reference [%]")
+    axes[0].set_ylabel("CPU time per spreading run [s]")
+    axes[0].set_yscale("log")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--level", default="default")
+    parser.add_argument("--points", default="100:-10,100:0,100:10", help="U:omega pairs, mm/s:rad/s")
+    parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--variants", default="reference,default,E1e6,dt0.3,E1e6+dt0.3")
+    parser.add_argument("--reference", default="reference")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--name", default="fidelity")
+    args = parser.parse_args(argv)
+    base = load_config(ROOT / "config.yaml")
+    points = [tuple(float(v) for v in p.split(":")) for p in args.points.split(",")]
+    names = args.variants.split(",")
+    unknown = [n for n in names if n not in VARIANTS]
+    if unknown or args.reference not in names:
+        parser.error(f"unknown variant(s) {unknown} or reference {args.reference!r} not among --variants; "
+                     f"known: {sorted(VARIANTS)}")
+    tasks = [(n, variant_config(base, args.level, VARIANTS[n]), args.level, seed, points)
+             for n in names for seed in range(args.seeds)]
+    started = time.perf_counter()
+    with ProcessPoolExecutor(args.jobs) as pool:
+        runs = pd.DataFrame([row for rows in pool.map(run_scene, tasks) for row in rows])
+    out = ROOT / "benchmarks" / "measured"
+    runs.to_csv(out / f"{args.name}.csv", index=False)
+    table = summarise(runs, args.reference)
+    plot(table, out / f"{args.name}.png")
+    overrides = "\n".join(f"- `{n}`: {VARIANTS[n] or 'the level as configured'}" for n in names)
+    fmt = {c: "{:.1%}".format for c in table if c.startswith("err_")}
+    shown = table.copy()
+    for col, f in fmt.items():
+        shown[col] = shown[col].map(lambda v, f=f: "" if pd.isna(v) else f(v))
+    for col in ("cpu_s_per_run", "wall_s_per_run", "steps_per_run"):
+        shown[col] = shown[col].map(lambda v: "" if pd.isna(v) else f"{v:.0f}")
+    text = (f"# Run time against error ({args.level} level)\n\n"
+            f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, "
+            f"{args.jobs} scenes at once, in {time.perf_counter() - started:.0f} s, by\n"
+            f"`.venv/bin/python benchmarks/bench_fidelity.py {' '.join(argv if argv is not None else sys.argv[1:])}`.\n\n"
+            f"Points (U mm/s, omega rad/s): {points}; {args.seeds} seeds (heap packings) per variant.\n"
+            f"Error: mean over the points of |variant - reference| / mean |reference|, each the mean "
+            f"over its seeds.\n\nVariants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")
+    (out / f"{args.name}.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
