@@ -343,8 +343,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                    substrate_stl=meshes / "substrate.stl", roller_stl=meshes / "roller_shell.stl",
                    roller_z=s.roller_gap + s.roller_radius, travel_steps=travel_steps,
                    **rest_loop(s, len(atoms0), s.rest_time), movie_every=movie_every, movie="movie.dump",
-                   dump="final.dump.part", checkpoint_dir=CHECKPOINT_DIR,
-                   checkpoint_every=ceil(travel_steps / (s.checkpoints_per_run + 1)))
+                   dump="final.dump.part", checkpoint_dir=CHECKPOINT_DIR)
 
     def render_from(step: int, restart: Path | None) -> str:
         """The input starting at ``step`` of the travel (0: from the settled heap)."""
