@@ -112,10 +112,30 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
         if lvl["sampling_start_mm"] < lvl["heap_length_mm"]:
             _fail(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
                   f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")
-    n_runs = len(config["sweep"]["U_mm_s"]) * len(config["sweep"]["omega_rad_s"])
-    if config["surrogate"]["n_test"] > n_runs - 3:
+    points = design_points(config)
+    names = [run_name(U, w, 0) for U, w in points]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        _fail("sweep.points_mm_s_rad_s", config["sweep"]["points_mm_s_rad_s"],
+              f"lists the same run folder twice: {', '.join(repeated)}")
+    n_points = len(points)
+    if config["surrogate"]["n_test"] > n_points - 3:
         _fail("surrogate.n_test", config["surrogate"]["n_test"],
-              f"leaves fewer than 3 of the sweep's {n_runs} (U, omega) points to train on")
+              f"leaves fewer than 3 of the sweep's {n_points} (U, omega) points to train on")
+
+
+def run_name(U: float, omega: float, replicate: int) -> str:
+    """Folder name of one run: U in mm/s, omega in rad/s, replicate index (``U70_w-2.5_r0``)."""
+    return f"U{U:g}_w{omega:g}_r{replicate}"
+
+
+def design_points(config: dict) -> list[tuple[float, float]]:
+    """The sweep's (U [mm/s], omega [rad/s]) points: ``sweep.points_mm_s_rad_s`` if given,
+    else the grid ``U_mm_s x omega_rad_s`` (U outer)."""
+    sweep = config["sweep"]
+    if sweep.get("points_mm_s_rad_s"):
+        return [(float(U), float(w)) for U, w in sweep["points_mm_s_rad_s"]]
+    return [(float(U), float(w)) for U in sweep["U_mm_s"] for w in sweep["omega_rad_s"]]
 
 
 # --------------------------------------------------------------------------

@@ -8,6 +8,12 @@ R_q/max(R_q) * Phi/max(Phi) against the throughput index
 Q_s/max(Q_s) * M_s/max(M_s), with iso-U and iso-omega lines of the
 surrogate).  Figures are drawn on matplotlib's Agg canvas (pyplot is never
 imported, so no display is needed) and written as PNG and SVG.
+
+Beyond the paper: with replicates the points drawn are the replicate means
+(with their seed-to-seed range), and when the surrogate gives a predictive
+standard deviation (:func:`analysis.surrogate.provides_std`) each regressed
+surface gets a companion map of it (``<metric>_std``) and the process map
+draws +-1 std crosses along its iso-lines.
 """
 
 from __future__ import annotations
@@ -19,8 +25,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from analysis.surrogate import (INPUTS, METRICS, atomic_path, hybrid_indices, inputs_of,
-                                metric_maxima, pearson_r, predict_frame, predict_grid)
+from analysis.surrogate import (INPUTS, METRICS, atomic_path, hybrid_index_std, hybrid_indices,
+                                inputs_of, metric_maxima, pearson_r, point_means, predict_frame,
+                                predict_grid, provides_std)
 
 #: Axis labels with units (matplotlib mathtext).
 LABELS = {
@@ -92,6 +99,7 @@ def surface_figure(model, df, split, metric, n=41):
     for rows, colour, label in ((split[0], _TRAIN, "training runs"), (split[1], _TEST, "test runs")):
         ax.scatter(X[rows, 1], X[rows, 0], df[metric].to_numpy(float)[rows], color=colour,
                    s=22, depthshade=False, label=f"{label} ({len(rows)})")
+    _replicate_ranges(ax, df, metric)
     ax.set_xlabel(LABELS["omega_rad_s"], labelpad=8)
     ax.set_ylabel(LABELS["U_mm_s"], labelpad=8)
     ax.zaxis.set_rotate_label(False)
@@ -101,6 +109,56 @@ def surface_figure(model, df, split, metric, n=41):
     ax.legend(loc="upper left", fontsize=9)
     fig.colorbar(surf, ax=ax, shrink=0.6, pad=0.02, label=LABELS[metric])
     fig.subplots_adjust(left=0.02, right=0.98, bottom=0.04, top=0.94)
+    return fig
+
+
+def _replicate_ranges(ax, points, metric):
+    """Vertical +-1 seed-to-seed std segments at replicated points (3-D axes)."""
+    if f"{metric}_sd" not in points or not (points[f"{metric}_sd"] > 0).any():
+        return
+    rep = points[points[f"{metric}_sd"] > 0]
+    mean, sd = rep[metric].to_numpy(float), rep[f"{metric}_sd"].to_numpy(float)
+    for w, u, lo, hi in zip(rep["omega_rad_s"], rep["U_mm_s"], mean - sd, mean + sd):
+        ax.plot([w, w], [u, u], [lo, hi], color="0.3", lw=1)
+
+
+def std_figure(model, df, split, metric, n=41):
+    """Companion of the regressed surface: the surrogate's predictive std of one metric.
+
+    Parameters
+    ----------
+    model : estimator
+        Fitted surrogate with a predictive standard deviation.
+    df : pandas.DataFrame
+        The simulated points (replicate means), for the range and the markers.
+    split : (array of int, array of int)
+        Positions of the training and test points in ``df``.
+    metric : str
+        One of METRICS.
+    n : int
+        Grid points per axis.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Filled contours of the std (metric units) over (omega, U), the
+        training (blue) and test (black) points on top.
+    """
+    X = inputs_of(df)
+    grid = predict_grid(model, (X[:, 0].min(), X[:, 0].max()), (X[:, 1].min(), X[:, 1].max()), n)
+    U, omega, S = (grid[c].to_numpy().reshape(n, n) for c in ("U_mm_s", "omega_rad_s",
+                                                               f"{metric}_std"))
+    fig = _figure(figsize=(7.5, 5.8), layout="constrained")
+    ax = fig.add_subplot()
+    filled = ax.contourf(omega, U, S, levels=14, cmap="viridis")
+    for rows, colour, marker, label in ((split[0], _TRAIN, "o", "training runs"),
+                                        (split[1], _TEST, "s", "test runs")):
+        ax.scatter(X[rows, 1], X[rows, 0], color=colour, edgecolor="white", marker=marker,
+                   s=30, label=f"{label} ({len(rows)})")
+    ax.set(xlabel=LABELS["omega_rad_s"], ylabel=LABELS["U_mm_s"],
+           title=f"{TITLES[metric]}: surrogate uncertainty")
+    fig.colorbar(filled, ax=ax, label=f"predictive std of {LABELS[metric]}")
+    ax.legend(loc="upper left", fontsize=8, framealpha=0.8)
     return fig
 
 
@@ -133,6 +191,9 @@ def parity_figure(df, predicted, split, metric):
         r = pearson_r(sim[rows, None], pred[rows, None])[0]
         ax.plot([lo - pad, hi + pad], [lo - pad, hi + pad], color="0.5", lw=1, label="1:1")
         ax.scatter(sim[rows], pred[rows], color=colour, s=25, label=f"{len(rows)} runs")
+        if f"{metric}_sd" in df and (df[f"{metric}_sd"] > 0).any():
+            ax.errorbar(sim[rows], pred[rows], xerr=df[f"{metric}_sd"].to_numpy(float)[rows],
+                        fmt="none", ecolor=colour, alpha=0.5, lw=1)
         ax.set(xlim=(lo - pad, hi + pad), ylim=(lo - pad, hi + pad), aspect="equal",
                xlabel=f"simulated {LABELS[metric]}", ylabel=f"predicted {LABELS[metric]}",
                title=f"{name}: R = {r:.3f}")
@@ -174,6 +235,17 @@ def process_map_lines(model, U_values, omega_values, maxima, n=101):
     return lines
 
 
+def iso_values(df, n_U=5, n_omega=9):
+    """Speeds of the process map's iso-lines: the design's own if it is a full grid, else
+    ``n_U`` and ``n_omega`` evenly spaced values over its range (mm/s, rad/s)."""
+    U, omega = (np.unique(df[c].to_numpy(float)) for c in INPUTS)
+    n_points = len(np.unique(df[list(INPUTS)].to_numpy(float), axis=0))
+    if U.size * omega.size == n_points and U.size <= 15 and omega.size <= 15:
+        return U, omega
+    return (np.round(np.linspace(U.min(), U.max(), n_U), 1),
+            np.round(np.linspace(omega.min(), omega.max(), n_omega), 2))
+
+
 def process_map_figure(model, df, split, n=101):
     """The spreading process map of the paper's Figure 10.
 
@@ -185,7 +257,8 @@ def process_map_figure(model, df, split, n=101):
     model : estimator
         Fitted surrogate.
     df : pandas.DataFrame
-        The simulated runs; its distinct U and omega are the iso-line values.
+        The simulated points; its distinct U and omega are the iso-line values
+        when they form a full grid (:func:`iso_values`).
     split : (array of int, array of int)
         Row positions of the training and test runs.
     n : int
@@ -195,11 +268,14 @@ def process_map_figure(model, df, split, n=101):
     -------
     matplotlib.figure.Figure
     """
-    U_values, omega_values = (np.unique(df[c].to_numpy(float)) for c in INPUTS)
+    U_values, omega_values = iso_values(df)
     maxima = metric_maxima(predict_grid(model, (U_values.min(), U_values.max()),
                                         (omega_values.min(), omega_values.max()), n))
     lines = process_map_lines(model, U_values, omega_values, maxima, n)
     runs_t, runs_d = hybrid_indices(df, maxima)
+    with_std = provides_std(model)
+    if with_std:
+        lines["throughput_index_std"], lines["defect_index_std"] = hybrid_index_std(lines, maxima)
 
     fig = _figure(figsize=(8.0, 6.5), layout="constrained")
     ax = fig.add_subplot()
@@ -215,6 +291,13 @@ def process_map_figure(model, df, split, n=101):
         ax.plot(line["throughput_index"], line["defect_index"], color=colour, lw=1.2,
                 label=None if family in labelled else legend)
         labelled.add(family)
+        if with_std:           # +-1 predictive std crosses at every 10th point of the line
+            every = line.iloc[::10]
+            ax.errorbar(every["throughput_index"], every["defect_index"],
+                        xerr=every["throughput_index_std"], yerr=every["defect_index_std"],
+                        fmt="none", ecolor=colour, alpha=0.35, lw=1,
+                        label=None if "std" in labelled else "±1 predictive std")
+            labelled.add("std")
         end = line.loc[(sign * line[along]).idxmax()]
         ax.annotate(fmt.format(value), (end["throughput_index"], end["defect_index"]),
                     textcoords="offset points", color=colour, fontsize=8, **place)
@@ -232,14 +315,15 @@ def process_map_figure(model, df, split, n=101):
 
 
 def render_maps(model, df, split, outdir, n=41):
-    """Write every figure: surfaces, parity plots, process map.
+    """Write every figure: surfaces, parity plots, process map (and uncertainty maps).
 
     Parameters
     ----------
     model : estimator
         Fitted surrogate.
     df : pandas.DataFrame
-        The simulated runs it was fitted on.
+        The simulated runs it was fitted on (replicates are drawn as their
+        mean, :func:`analysis.surrogate.point_means`).
     split : (array of int, array of int)
         Row positions of the training and test runs.
     outdir : str or pathlib.Path
@@ -251,21 +335,25 @@ def render_maps(model, df, split, outdir, n=41):
     Returns
     -------
     list of pathlib.Path
-        ``<metric>_surface.{png,svg}`` and ``<metric>_parity.{png,svg}`` per
+        ``<metric>_surface.{png,svg}``, ``<metric>_parity.{png,svg}`` and,
+        when the model gives a predictive std, ``<metric>_std.{png,svg}`` per
         metric (metric = dataset column, e.g. ``mass_g``), then
         ``process_map.{png,svg}``.
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    predicted = model.predict(inputs_of(df))
-    split = tuple(np.asarray(rows, int) for rows in split)
+    points, split = point_means(df, tuple(np.asarray(rows, int) for rows in split))
+    predicted = model.predict(inputs_of(points))
     paths = []
     with matplotlib.rc_context(_STYLE):
         for metric in METRICS:
-            paths += save_figure(surface_figure(model, df, split, metric, n), outdir,
+            paths += save_figure(surface_figure(model, points, split, metric, n), outdir,
                                  f"{metric}_surface")
-            paths += save_figure(parity_figure(df, predicted, split, metric), outdir,
+            paths += save_figure(parity_figure(points, predicted, split, metric), outdir,
                                  f"{metric}_parity")
-        paths += save_figure(process_map_figure(model, df, split, max(n, 101)), outdir,
+            if provides_std(model):
+                paths += save_figure(std_figure(model, points, split, metric, n), outdir,
+                                     f"{metric}_std")
+        paths += save_figure(process_map_figure(model, points, split, max(n, 101)), outdir,
                              "process_map")
     return paths

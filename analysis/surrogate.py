@@ -235,15 +235,40 @@ def deviation_from_paper(params):
             "(test R down to 0.90) where alpha 0.01 does not (test R >= 0.98).")
 
 
+def point_groups(df):
+    """Label of each run's (U, omega) point, numbered in order of first appearance.
+
+    Replicates (runs at the same speeds from different heap packings) share a
+    label; with one run per point the labels are ``0 .. n-1`` in row order.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        Has ``U_mm_s`` (mm/s) and ``omega_rad_s`` (rad/s).
+
+    Returns
+    -------
+    numpy.ndarray of int, shape (n_runs,)
+    """
+    keys = df[list(INPUTS)].to_numpy(float)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    rank = np.argsort(np.argsort(first))
+    return rank[inverse.ravel()]
+
+
 def split_runs(df, n_test, seed):
-    """Split the runs into training and test sets, reproducibly.
+    """Split the runs into training and test sets by (U, omega) point, reproducibly.
+
+    All replicates of one point fall on the same side, so a test point is
+    never seen in training through its twin.  With one run per point this is
+    the plain seeded split of the runs.
 
     Parameters
     ----------
     df : pandas.DataFrame
         One row per DEM run.
     n_test : int
-        Number of test runs (the paper: 10 of 45).
+        Number of test (U, omega) points (the paper: 10 of 45).
     seed : int
         Seed of the shuffle.
 
@@ -252,18 +277,76 @@ def split_runs(df, n_test, seed):
     train_idx, test_idx : numpy.ndarray of int
         Sorted row positions (``df.iloc``) of the training and test runs.
     """
-    n = len(df)
+    groups = point_groups(df)
+    n = int(groups.max()) + 1 if len(groups) else 0
     if not 1 <= n_test < n:
-        raise ValueError(f"n_test={n_test} must be between 1 and {n - 1} for {n} runs")
-    train, test = train_test_split(np.arange(n), test_size=int(n_test), random_state=int(seed))
-    return np.sort(train), np.sort(test)
+        raise ValueError(f"n_test={n_test} must be between 1 and {n - 1} for {n} (U, omega) points")
+    _, test_points = train_test_split(np.arange(n), test_size=int(n_test), random_state=int(seed))
+    is_test = np.isin(groups, test_points)
+    return np.flatnonzero(~is_test), np.flatnonzero(is_test)
+
+
+def point_folds(df, folds, seed):
+    """Shuffled k-fold splits of the runs by (U, omega) point (replicates stay together).
+
+    With one run per point these are exactly ``KFold(folds, shuffle=True,
+    random_state=seed)`` over the runs.
+
+    Returns
+    -------
+    list of (train_idx, test_idx)
+        Row positions, usable as ``cv=`` of scikit-learn's model selection.
+    """
+    groups = point_groups(df)
+    n = int(groups.max()) + 1
+    if not 2 <= int(folds) <= n:
+        raise ValueError(f"cv folds={folds} must be between 2 and the {n} (U, omega) points")
+    splitter = KFold(int(folds), shuffle=True, random_state=int(seed))
+    return [(np.flatnonzero(np.isin(groups, tr)), np.flatnonzero(np.isin(groups, te)))
+            for tr, te in splitter.split(np.arange(n))]
+
+
+def point_means(df, split=None):
+    """One row per (U, omega) point: the replicate mean, std and count of each metric.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        The runs (speeds and the four metrics).
+    split : (array of int, array of int), optional
+        Row positions of the training and test runs (by point, see
+        :func:`split_runs`); mapped to point positions.
+
+    Returns
+    -------
+    points : pandas.DataFrame
+        In order of first appearance: ``U_mm_s``, ``omega_rad_s``,
+        ``n_replicates``, the metric means (their column names) and
+        ``<metric>_sd`` (seed-to-seed standard deviation, ddof 1; 0 for a
+        single run), in the metrics' units.
+    point_split : (array of int, array of int) or None
+        Point positions of the training and test points.
+    """
+    groups = point_groups(df)
+    frame = df[list(INPUTS) + list(METRICS)].assign(_point=groups)
+    grouped = frame.groupby("_point", sort=True)
+    points = grouped[list(INPUTS) + list(METRICS)].mean().reset_index(drop=True)
+    points.insert(2, "n_replicates", grouped.size().to_numpy())
+    sd = grouped[list(METRICS)].std(ddof=1).fillna(0.0).reset_index(drop=True)
+    for m in METRICS:
+        points[f"{m}_sd"] = sd[m].to_numpy()
+    if split is None:
+        return points, None
+    test_points = np.unique(groups[np.asarray(split[1], int)])
+    is_test = np.isin(np.arange(len(points)), test_points)
+    return points, (np.flatnonzero(~is_test), np.flatnonzero(is_test))
 
 
 def split_table(df, train_idx, test_idx):
-    """The split as a table (for split.csv): row, U_mm_s, omega_rad_s, seed, set."""
+    """The split as a table (for split.csv): row, U_mm_s, omega_rad_s, replicate/seed if present, set."""
     if len(train_idx) + len(test_idx) != len(df):
         raise ValueError("train and test rows do not cover the dataset")
-    table = df[[c for c in (*INPUTS, "seed") if c in df.columns]].reset_index(drop=True)
+    table = df[[c for c in (*INPUTS, "replicate", "seed") if c in df.columns]].reset_index(drop=True)
     table.insert(0, "row", np.arange(len(df)))
     table["set"] = "train"
     table.loc[np.asarray(test_idx), "set"] = "test"
@@ -394,7 +477,7 @@ def fit_surrogate(df, params):
         ``input_range`` and ``swept`` (per input: [min, max] and the distinct
         values), ``train`` and ``test`` (:func:`regression_scores`), ``cv``
         (the same scores from pooled out-of-fold predictions of a shuffled
-        ``KFold(cv_folds)`` over all runs), ``cv_settings``, ``mape_note`` and
+        ``KFold(cv_folds)`` over the (U, omega) points, :func:`point_folds`), ``cv_settings``, ``mape_note`` and
         ``warnings`` (metrics whose training R is below :data:`R_TARGET`,
         i.e. the network under-fits: lower ``alpha``).
 
@@ -415,7 +498,7 @@ def fit_surrogate(df, params):
     for msg in messages:
         warnings.warn(f"surrogate fit did not converge: {msg}", ConvergenceWarning, stacklevel=2)
 
-    folds = KFold(int(params["cv_folds"]), shuffle=True, random_state=int(params["split_seed"]))
+    folds = point_folds(df, params["cv_folds"], params["split_seed"])
     with _convergence_messages() as cv_messages:
         Y_cv = cross_val_predict(make_surrogate(params), X, Y, cv=folds)
 
@@ -432,7 +515,9 @@ def fit_surrogate(df, params):
                 "convergence_warnings": messages,
                 "fit_time_s": round(fit_time, 4)},
         "split": {"seed": int(params["split_seed"]), "n_train": len(train),
-                  "n_test": len(test), "train": train.tolist(), "test": test.tolist()},
+                  "n_test": len(test), "n_points": int(point_groups(df).max()) + 1,
+                  "by": "(U, omega) point: replicates of a point are never split",
+                  "train": train.tolist(), "test": test.tolist()},
         "input_range": {c: [float(X[:, j].min()), float(X[:, j].max())]
                         for j, c in enumerate(INPUTS)},
         "swept": {c: np.unique(X[:, j]).tolist() for j, c in enumerate(INPUTS)},
@@ -441,6 +526,7 @@ def fit_surrogate(df, params):
         "cv": regression_scores(Y, Y_cv),
         "cv_settings": {"folds": int(params["cv_folds"]), "shuffle": True,
                         "seed": int(params["split_seed"]), "scope": "all runs",
+                        "grouped_by": "(U, omega) point",
                         "pooled": "scores of the out-of-fold predictions of all runs",
                         "converged": not cv_messages,
                         "n_convergence_warnings": len(cv_messages)},
@@ -546,14 +632,80 @@ def hybrid_indices(frame, maxima=None):
             norm["roughness_um"] * norm["porosity_pct"])
 
 
+def provides_std(model):
+    """True if ``model.predict(X, return_std=True)`` gives a predictive standard deviation.
+
+    The candidates of :mod:`analysis.model_choice` do (GP posterior, spread of
+    an MLP ensemble or of a tree ensemble); the plain network of
+    :func:`make_surrogate` does not.
+    """
+    return bool(getattr(model, "provides_std", False))
+
+
+def predict_with_std(model, U, omega):
+    """Predicted metrics and their predictive standard deviation at the speeds.
+
+    Parameters
+    ----------
+    model : estimator
+        A fitted surrogate with :func:`provides_std`.
+    U, omega : array_like, 1-D, same length
+        Spreader translation speed (mm/s) and roller angular speed (rad/s).
+
+    Returns
+    -------
+    mean, std : numpy.ndarray, shape (n, 4)
+        Columns in :data:`METRICS` order, in the metrics' units.  ``std`` is
+        the uncertainty of the predicted *mean* metric (not the seed-to-seed
+        scatter of a single run, see :mod:`analysis.noise_floor`).
+
+    Raises
+    ------
+    ValueError
+        If the model gives no predictive standard deviation.
+    """
+    if not provides_std(model):
+        raise ValueError(f"{type(model).__name__} gives no predictive standard deviation; "
+                         "refit with a model of analysis.model_choice (gp, mlp ensemble, trees)")
+    X = np.c_[np.asarray(U, float), np.asarray(omega, float)]
+    mean, std = model.predict(X, return_std=True)
+    return np.asarray(mean, float), np.asarray(std, float)
+
+
 def predict_frame(model, U, omega):
-    """Predict the metrics at the speeds ``U`` [mm/s] and ``omega`` [rad/s] (1-D, same length)."""
+    """Predict the metrics at the speeds ``U`` [mm/s] and ``omega`` [rad/s] (1-D, same length).
+
+    Returns a frame of the speeds and the four metrics; when the model gives a
+    predictive standard deviation (:func:`provides_std`), also
+    ``<metric>_std`` columns in the metric's unit.
+    """
     U, omega = np.asarray(U, float), np.asarray(omega, float)
     frame = pd.DataFrame({"U_mm_s": U, "omega_rad_s": omega})
-    pred = model.predict(np.c_[U, omega])
+    if provides_std(model):
+        pred, std = predict_with_std(model, U, omega)
+    else:
+        pred, std = model.predict(np.c_[U, omega]), None
     for j, m in enumerate(METRICS):
         frame[m] = pred[:, j]
+    if std is not None:
+        for j, m in enumerate(METRICS):
+            frame[f"{m}_std"] = std[:, j]
     return frame
+
+
+def hybrid_index_std(frame, maxima):
+    """First-order standard deviation of the hybrid indices from the metrics' ``_std`` columns.
+
+    Treats the errors of the metrics as independent:
+    ``std(Q M) = sqrt((std_Q M)^2 + (Q std_M)^2)``, divided by the maxima
+    (held fixed).  Returns (throughput_index_std, defect_index_std),
+    dimensionless.
+    """
+    def product_std(a, b):
+        va, vb = frame[a].to_numpy(float), frame[b].to_numpy(float)
+        sa, sb = frame[f"{a}_std"].to_numpy(float), frame[f"{b}_std"].to_numpy(float)
+        return np.hypot(sa * vb, va * sb) / (maxima[a] * maxima[b])
+    return (product_std("throughput_mm2_s", "mass_g"), product_std("roughness_um", "porosity_pct"))
 
 
 def predict_grid(model, U_range, omega_range, n):
@@ -575,12 +727,18 @@ def predict_grid(model, U_range, omega_range, n):
     pandas.DataFrame
         n*n rows (U outer, omega inner): ``U_mm_s``, ``omega_rad_s``, the four
         metrics in their units, and the dimensionless ``throughput_index`` and
-        ``defect_index`` (:func:`hybrid_indices`, maxima over this grid).
+        ``defect_index`` (:func:`hybrid_indices`, maxima over this grid).  When
+        the model gives a predictive standard deviation, also
+        ``<metric>_std`` (metric units) and ``throughput_index_std``,
+        ``defect_index_std`` (:func:`hybrid_index_std`).
     """
     if int(n) < 2:
         raise ValueError(f"grid needs at least 2 points per axis, got {n}")
     U, omega = np.meshgrid(np.linspace(*U_range, int(n)), np.linspace(*omega_range, int(n)),
                            indexing="ij")
     grid = predict_frame(model, U.ravel(), omega.ravel())
-    grid["throughput_index"], grid["defect_index"] = hybrid_indices(grid)
+    maxima = metric_maxima(grid)
+    grid["throughput_index"], grid["defect_index"] = hybrid_indices(grid, maxima)
+    if provides_std(model):
+        grid["throughput_index_std"], grid["defect_index_std"] = hybrid_index_std(grid, maxima)
     return grid

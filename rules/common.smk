@@ -1,5 +1,5 @@
 # Shared by every rule file: the checked configuration, the fidelity level and the runs.
-from analysis.config import ConfigError, load_config, scene  # noqa: E402
+from analysis.config import ConfigError, design_points, load_config, run_name, scene  # noqa: E402
 
 try:
     CONFIG = load_config(config, base_dir=workflow.basedir)
@@ -13,16 +13,14 @@ LOGS = f"results/logs/{LEVEL}"
 BENCH = f"results/benchmarks/{LEVEL}"
 
 
-def run_name(U, omega, replicate):
-    """Folder name of one run: U in mm/s, omega in rad/s, replicate index."""
-    return f"U{U:g}_w{omega:g}_r{replicate}"
-
-
-RUNS = [run_name(U, w, r) for U in CONFIG["sweep"]["U_mm_s"] for w in CONFIG["sweep"]["omega_rad_s"]
-        for r in range(CONFIG["sweep"]["replicates"])]
+# The runs: the U x omega grid, or the explicit sweep.points_mm_s_rad_s (an off-grid design),
+# each with sweep.replicates heap packings; folders are named U{U:g}_w{omega:g}_r{rep}, so
+# a point already run under another design is reused.
+POINTS = design_points(CONFIG)
+RUNS = [run_name(U, w, r) for U, w in POINTS for r in range(CONFIG["sweep"]["replicates"])]
 # Top views (the paper's Figure 4): the fastest U at the omegas nearest -5, 0, +5 rad/s.
-_U_MAX = max(CONFIG["sweep"]["U_mm_s"])
-_OMEGAS = sorted({min(CONFIG["sweep"]["omega_rad_s"], key=lambda w: abs(w - t)) for t in (-5, 0, 5)})
+_U_MAX = max(U for U, _ in POINTS)
+_OMEGAS = sorted({min([w for U, w in POINTS if U == _U_MAX], key=lambda w: abs(w - t)) for t in (-5, 0, 5)})
 TOP_VIEWS = [f"{OUT}/top_views/{run_name(_U_MAX, w, 0)}.png" for w in _OMEGAS]
 
 wildcard_constraints:

@@ -1,7 +1,43 @@
-rule surrogate:
-    """The paper's Table 2 network over (U, omega), with scores and a fine grid."""
+rule noise_floor:
+    """Seed-to-seed spread of each metric per (U, omega) point (needs sweep.replicates >= 2)."""
     input:
         dataset=rules.dataset.output[0],
+    output:
+        csv=f"{OUT}/surrogate/noise_floor.csv",
+        md=report(f"{OUT}/surrogate/noise_floor.md", category="Surrogate"),
+    params:
+        level=LEVEL,
+    log:
+        f"{LOGS}/noise_floor.log",
+    benchmark:
+        f"{BENCH}/noise_floor.tsv"
+    script:
+        "../scripts/noise_floor.py"
+
+
+rule model_choice:
+    """Candidate surrogates (paper MLP, GP, trees) scored by grouped repeated k-fold and LOO CV."""
+    input:
+        dataset=rules.dataset.output[0],
+    output:
+        csv=f"{OUT}/surrogate/model_choice.csv",
+        md=report(f"{OUT}/surrogate/model_choice.md", category="Surrogate"),
+    params:
+        surrogate=CONFIG["surrogate"],
+        level=LEVEL,
+    log:
+        f"{LOGS}/model_choice.log",
+    benchmark:
+        f"{BENCH}/model_choice.tsv"
+    script:
+        "../scripts/model_choice.py"
+
+
+rule surrogate:
+    """The paper's Table 2 network's scores, and the chosen model (with its predictive std) and grid."""
+    input:
+        dataset=rules.dataset.output[0],
+        choice=rules.model_choice.output.csv,
     output:
         model=f"{OUT}/surrogate/model.joblib",
         scores=report(f"{OUT}/surrogate/scores.json", category="Surrogate"),

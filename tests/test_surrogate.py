@@ -12,6 +12,8 @@ import sklearn
 from conftest import synthetic_dataset
 from sklearn.exceptions import ConvergenceWarning
 
+from analysis.model_choice import (DEFAULT_CHOICE, GPSurrogate, cross_validate_models,
+                                   write_model_choice)
 from analysis.surrogate import (DEFAULT_SURROGATE, METRICS, R_TARGET, deviation_from_paper,
                                 fit_surrogate, hybrid_indices, inputs_of, load_surrogate,
                                 predict_grid, read_split, regression_scores, save_surrogate,
@@ -152,20 +154,34 @@ def test_split_table_roundtrip(dataset, tmp_path):
 
 
 def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
-    synthetic_dataset(0, noise=0.01).to_csv(tmp_path / "dataset.csv", index=False)
+    """The rule keeps the paper network's scores and saves the model chosen by
+    cross-validation (here a GP, from a model_choice.csv naming it)."""
+    data = synthetic_dataset(0, noise=0.01)
+    data.to_csv(tmp_path / "dataset.csv", index=False)
+    params = {**fit_params, **DEFAULT_CHOICE, "grid_points": 11, "models": ["gp"],
+              "cv_repeats": 1, "cv_loo": False}
+    write_model_choice(cross_validate_models(data, params), "gp", tmp_path / "choice.csv",
+                       tmp_path / "choice.md")
     out = {name: str(tmp_path / "surrogate" / file) for name, file in
            (("model", "model.joblib"), ("scores", "scores.json"), ("split", "split.csv"),
             ("grid", "grid.csv"))}
-    smk = fake_snakemake({"dataset": str(tmp_path / "dataset.csv")}, out,
-                         {"surrogate": {**fit_params, "grid_points": 11}, "grid_points": 11})
+    smk = fake_snakemake({"dataset": str(tmp_path / "dataset.csv"),
+                          "choice": str(tmp_path / "choice.csv")}, out,
+                         {"surrogate": params, "grid_points": 11})
     runpy.run_path(str(smk.scriptdir / "fit_surrogate.py"), init_globals={"snakemake": smk})
 
     scores = json.loads(Path(out["scores"]).read_text())
-    assert min(s["R"] for s in scores["test"].values()) >= R_TARGET
+    assert min(s["R"] for s in scores["test"].values()) >= R_TARGET       # the paper's network
+    assert scores["model"]["name"] == "gp" and scores["model"]["n_train"] == 35
+    assert min(s["R"] for s in scores["model"]["test"].values()) >= R_TARGET
+    assert set(scores["model"]["cv"]["kfold"]) == set(METRICS)
     split = pd.read_csv(out["split"])
     assert split["set"].value_counts().to_dict() == {"train": 35, "test": 10}
     grid = pd.read_csv(out["grid"])
     assert len(grid) == 121 and grid["throughput_index"].max() == pytest.approx(1.0)
+    assert (grid[[f"{m}_std" for m in METRICS]] > 0).all().all()
     model, meta = load_surrogate(out["model"])
+    assert isinstance(model, GPSurrogate) and meta["model"]["name"] == "gp"
     assert meta["split"]["test"] == split.index[split["set"] == "test"].tolist()
-    assert "converged" in (tmp_path / "rule.log").read_text()
+    log = (tmp_path / "rule.log").read_text()
+    assert "converged" in log and "chosen by cross-validation: gp" in log

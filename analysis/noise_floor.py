@@ -1,0 +1,158 @@
+"""The noise floor: how much a spread layer's metrics change with the heap packing alone.
+
+The paper calls its DEM data noise-free.  It is not: the same spreader speeds
+on a differently packed heap (another random seed, same physics) give another
+layer.  With ``sweep.replicates`` >= 2 every (U, omega) point is simulated from
+several heap packings; the seed-to-seed standard deviation of each metric is
+the noise floor, and no surrogate can predict a single run better than it.
+
+:func:`noise_floor` tabulates it per point; :func:`accuracy_ceiling` turns it
+into the best cross-validated scores a perfect model of the mean could reach
+on these runs (compare :mod:`analysis.model_choice`'s table against them).
+
+Columns, units: as the dataset (``U_mm_s`` mm/s, ``omega_rad_s`` rad/s,
+``mass_g`` g, ``throughput_mm2_s`` mm^2/s, ``roughness_um`` um,
+``porosity_pct`` %); relative spreads in % of the point's mean.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from analysis.surrogate import INPUTS, METRICS, atomic_path, point_groups, point_means
+
+#: Row label of the pooled summary in the noise-floor table.
+POOLED = "pooled"
+
+
+def noise_floor(df):
+    """Seed-to-seed spread of each metric, per (U, omega) point with >= 2 replicates.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        The runs: ``U_mm_s``, ``omega_rad_s`` and the four metric columns,
+        several rows (replicates) per point.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per replicated point, then a row ``point = "pooled"``:
+        ``point`` (``U<U>_w<omega>``), ``U_mm_s``, ``omega_rad_s``,
+        ``n_replicates``, and per metric ``<metric>_mean``, ``<metric>_sd``
+        (standard deviation over the replicates, ddof 1, metric units) and
+        ``<metric>_rel_pct`` (sd / |mean| x 100; NaN where the mean is 0).
+        The pooled row has the pooled standard deviation
+        ``sqrt(sum (y - mean_point)^2 / sum (n_point - 1))``, the mean of the
+        point means, and their ratio.  Empty (no rows) when no point has two
+        replicates.
+    """
+    points, _ = point_means(df)
+    rep = points[points["n_replicates"] >= 2].reset_index(drop=True)
+    table = pd.DataFrame({
+        "point": [f"U{u:g}_w{w:g}" for u, w in rep[list(INPUTS)].to_numpy()],
+        "U_mm_s": rep["U_mm_s"], "omega_rad_s": rep["omega_rad_s"],
+        "n_replicates": rep["n_replicates"]})
+    dof = (rep["n_replicates"] - 1).to_numpy(float)
+    pooled = {"point": POOLED, "U_mm_s": np.nan, "omega_rad_s": np.nan,
+              "n_replicates": int(rep["n_replicates"].sum())}
+    for m in METRICS:
+        mean, sd = rep[m].to_numpy(float), rep[f"{m}_sd"].to_numpy(float)
+        table[f"{m}_mean"], table[f"{m}_sd"] = mean, sd
+        table[f"{m}_rel_pct"] = _relative(sd, mean)
+        if len(rep):
+            pooled_sd = float(np.sqrt(np.sum(dof * sd**2) / dof.sum()))
+            pooled_mean = float(np.mean(np.abs(mean)))
+            pooled.update({f"{m}_mean": pooled_mean, f"{m}_sd": pooled_sd,
+                           f"{m}_rel_pct": float(_relative(pooled_sd, pooled_mean))})
+    if len(rep):
+        table = pd.concat([table, pd.DataFrame([pooled])], ignore_index=True)
+    return table
+
+
+def _relative(sd, mean):
+    sd, mean = np.asarray(sd, float), np.asarray(mean, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(mean != 0, 100.0 * sd / np.abs(mean), np.nan)
+
+
+def accuracy_ceiling(df):
+    """Best cross-validated R, R^2 and MAPE a model of the mean metric can reach on ``df``.
+
+    A perfect model predicts each point's true mean; its error on a single
+    run is that run's deviation from the mean, whose variance is the noise
+    floor.  Estimated from the points with >= 2 replicates (the noise assumed
+    the same at every point):
+
+    * ``R2_max = 1 - s_pooled^2 / var(y)`` over all runs (clipped at 0),
+    * ``R_max = sqrt(R2_max)``,
+    * ``MAPE_floor_pct``: mean of ``|y - mean_point| / |y| x sqrt(n/(n-1))``
+      over the replicated runs with y != 0 (the factor undoes the shrinkage
+      of deviations from a sample mean).
+
+    Returns
+    -------
+    dict or None
+        ``{metric: {"sd", "rel_pct", "R_max", "R2_max", "MAPE_floor_pct"}}``
+        (``sd`` in the metric's unit, ``rel_pct`` in % of the mean), or None
+        when no point has two replicates.
+    """
+    groups = point_groups(df)
+    counts = np.bincount(groups)
+    n_run = counts[groups]
+    replicated = n_run >= 2
+    if not replicated.any():
+        return None
+    floor = noise_floor(df).set_index("point").loc[POOLED]
+    out = {}
+    for m in METRICS:
+        y = df[m].to_numpy(float)
+        group_mean = np.bincount(groups, weights=y) / counts
+        dev = (y - group_mean[groups])[replicated]
+        scale = np.sqrt(n_run[replicated] / (n_run[replicated] - 1.0))
+        y_rep = y[replicated]
+        nonzero = y_rep != 0
+        sd = float(floor[f"{m}_sd"])
+        var_all = float(np.var(y, ddof=1)) if len(y) > 1 else np.nan
+        r2 = max(0.0, 1.0 - sd**2 / var_all) if var_all > 0 else np.nan
+        mape = (100.0 * np.mean(np.abs(dev[nonzero]) * scale[nonzero] / np.abs(y_rep[nonzero]))
+                if nonzero.any() else np.nan)
+        out[m] = {"sd": sd, "rel_pct": float(floor[f"{m}_rel_pct"]),
+                  "R_max": float(np.sqrt(r2)), "R2_max": float(r2), "MAPE_floor_pct": float(mape)}
+    return out
+
+
+def noise_floor_markdown(table, level=None):
+    """The noise-floor table as Markdown: per point, sd and sd/mean of each metric."""
+    title = "# Noise floor: seed-to-seed spread of the layer metrics" + (f" ({level})" if level else "")
+    if table.empty:
+        return (f"{title}\n\nOne run per (U, omega) point: no noise floor measured. Set "
+                "`sweep.replicates` to 2 or more (different heap packings, same physics) to "
+                "measure it.\n")
+    head = ["point", "replicates"] + [f"{s} sd ({u})" for s, u in METRICS.values()]
+    lines = [title, "",
+             "Standard deviation over the replicates (different random heap packings, same "
+             "physics) of each metric, and in brackets relative to its mean. The `pooled` row "
+             "pools the variances of all points. No surrogate predicts a single run better "
+             "than this.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * 2 + "---:|" * len(METRICS)]
+    for _, row in table.iterrows():
+        cells = [f"**{row['point']}**" if row["point"] == POOLED else row["point"],
+                 str(int(row["n_replicates"]))]
+        cells += [f"{row[f'{m}_sd']:.3g} ({_pct(row[f'{m}_rel_pct'])})" for m in METRICS]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _pct(x):
+    return "n/a" if not np.isfinite(x) else f"{x:.1f} %"
+
+
+def write_noise_floor(df, csv_path, md_path, level=None):
+    """Write :func:`noise_floor` of ``df`` as CSV and Markdown (each atomically); return the table."""
+    table = noise_floor(df)
+    with atomic_path(csv_path) as tmp:
+        table.to_csv(tmp, index=False)
+    with atomic_path(md_path) as tmp:
+        tmp.write_text(noise_floor_markdown(table, level))
+    return table
