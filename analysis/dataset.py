@@ -12,8 +12,8 @@ import pandas as pd
 from analysis.simulate import MAX_OVERLAP
 
 METRICS = ["mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"]
-HEALTH = ["heap_exhausted", "particles_ahead_of_roller", "atoms", "lost", "through_substrate", "max_overlap_fraction", "kinetic_energy_J", "steps",
-          "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m"]
+HEALTH = ["heap_exhausted", "particles_ahead_of_roller", "removed_ahead_of_roller", "atoms", "lost", "through_substrate",
+          "through_roller", "max_overlap_fraction", "peak_speed_m_s", "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m"]
 
 
 class UnsoundRunError(ValueError):
@@ -25,7 +25,9 @@ def check_run(row: dict) -> None:
 
     An empty sampling region is refused unless the heap was exhausted (then it
     is a measurement of no powder: the row keeps ``heap_exhausted`` = True)."""
-    problems = [f"{key} = {row[key]}" for key in ("lost", "through_substrate") if row[key]]
+    problems = [f"{key} = {row[key]}" for key in ("lost", "through_substrate", "through_roller") if row.get(key)]
+    if row.get("peak_speed_m_s") is not None and not np.isfinite(row["peak_speed_m_s"]):
+        problems.append("peak_speed_m_s is not finite (kinetic energy blew up)")
     if row["max_overlap_fraction"] > MAX_OVERLAP:
         problems.append(f"max_overlap_fraction = {row['max_overlap_fraction']:.3f} > {MAX_OVERLAP}")
     problems += [f"{key} is not finite" for key in METRICS if row[key] is None or not np.isfinite(row[key])]

@@ -143,7 +143,8 @@ def read_log(text: str) -> dict:
     Returns a dict: ``thermo`` (DataFrame of every thermo block, columns as in
     ``thermo_style``), ``inserted`` (particles inserted), ``atoms_final``,
     ``max_rayleigh_fraction``/``max_hertz_fraction`` (time step over the
-    Rayleigh and Hertz times, from ``check/timestep/gran``), ``warnings``.
+    Rayleigh and Hertz times, from ``check/timestep/gran``), ``warnings``,
+    ``printed`` (the values of the input's ``print "spreadmap <key> <value>"`` lines).
     """
     blocks, lines = [], text.splitlines()
     for i, line in enumerate(lines):
@@ -163,7 +164,8 @@ def read_log(text: str) -> dict:
     inserted = sum(int(n) for n in re.findall(r"inserted\s+(\d+)\s+particle templates", text))
     fractions = {key: float(thermo[col].max()) if col in thermo else float("nan")
                  for key, col in (("max_rayleigh_fraction", "ts[1]"), ("max_hertz_fraction", "ts[2]"))}
-    return {"thermo": thermo, "inserted": inserted,
+    printed = {key: float(value) for key, value in re.findall(r"^spreadmap (\w+) (\S+)$", text, re.MULTILINE)}
+    return {"thermo": thermo, "inserted": inserted, "printed": printed,
             "atoms_final": int(thermo["Atoms"].iloc[-1]) if len(thermo) else 0,
             "warnings": sorted(set(re.findall(r"^WARNING:.*$", text, re.MULTILINE))), **fractions}
 

@@ -1,0 +1,91 @@
+"""Numerical stability: every failure mode of a run is caught by the run wrapper
+or refused by the dataset, never passed on as a result.
+
+The real-engine case pushes the time step past the stable range (measured in
+benchmarks/measured/stress.md: 0.5 T_R passes, 0.8 T_R and above blow up)."""
+import copy
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analysis.dataset import UnsoundRunError, check_run
+from analysis.run_liggghts import LiggghtsError
+from analysis.simulate import (BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR, check_kinetic_energy, make_geometry,
+                               settle, through_roller)
+
+pytestmark = pytest.mark.xdist_group("liggghts_smoke")
+
+
+def thermo(vmax, energy=None):
+    steps = 1000 * np.arange(len(vmax))
+    energy = np.full(len(vmax), 1e-9) if energy is None else energy
+    return {"thermo": pd.DataFrame({"Step": steps, "KinEng": energy, "vmax": vmax})}
+
+
+def test_kinetic_energy_check_passes_a_calm_run_and_reports_its_peak():
+    assert check_kinetic_energy(thermo([0.1, 0.6, 0.2]), wall_speed=0.1) == {"peak_speed_m_s": 0.6}
+
+
+def test_kinetic_energy_blow_up_is_refused_naming_speed_step_and_limit():
+    wall = 0.4  # m/s: the limit is 10 x 0.4 = 4 m/s, above the 2 m/s floor
+    assert BLOWUP_SPEED_FACTOR * wall > BLOWUP_FLOOR_M_S
+    check_kinetic_energy(thermo([0.1, 3.9]), wall_speed=wall)
+    with pytest.raises(LiggghtsError, match=r"blow-up, a particle at 4\.1 m/s at step 2000 \(limit 4 m/s"):
+        check_kinetic_energy(thermo([0.1, 0.2, 4.1, 80.0]), wall_speed=wall)
+
+
+def test_non_finite_kinetic_energy_is_refused():
+    with pytest.raises(LiggghtsError, match="not finite at step 1000"):
+        check_kinetic_energy(thermo([0.1, 0.1], energy=np.array([1e-9, np.nan])))
+
+
+def test_particles_inside_the_roller_are_counted():
+    R, axis = 15e-3, (0.01, 15.3e-3)
+    # resting on the roller (centre R + r away), just inside its surface, deep inside
+    atoms = pd.DataFrame({"x": [0.01, 0.01, 0.012], "z": [0.3e-3 - 87e-6, 0.5e-3, 10e-3]})
+    assert through_roller(atoms, *axis, R) == 2
+
+
+def healthy_row(**changes):
+    row = {"U_mm_s": 70.0, "omega_rad_s": -5.0, "replicate": 0, "lost": 0, "through_substrate": 0,
+           "through_roller": 0, "max_overlap_fraction": 0.001, "peak_speed_m_s": 0.3, "n_particles": 120,
+           "heap_exhausted": False, "mass_g": 1e-3, "throughput_mm2_s": 10.0, "roughness_um": 80.0,
+           "porosity_pct": 70.0}
+    row.update(changes)
+    return row
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"through_roller": 3}, "through_roller = 3"),
+    ({"lost": 1}, "lost = 1"),
+    ({"max_overlap_fraction": 0.2}, "max_overlap_fraction = 0.200"),
+    ({"peak_speed_m_s": float("nan")}, "blew up"),
+    ({"roughness_um": float("nan")}, "roughness_um is not finite"),
+    ({"n_particles": 0}, "empty layer"),
+])
+def test_dataset_refuses_an_unsound_run_naming_it(change, message):
+    check_run(healthy_row())
+    with pytest.raises(UnsoundRunError, match=message) as err:
+        check_run(healthy_row(**change))
+    assert "U=70 mm/s, omega=-5 rad/s, replicate 0" in str(err.value)
+
+
+def test_time_step_above_the_guard_is_refused_before_liggghts_runs(config, tmp_path):
+    too_big = copy.deepcopy(config)
+    too_big["timestep"]["rayleigh_fraction"] = 0.5
+    with pytest.raises(LiggghtsError, match="exceeds the allowed fraction of the Rayleigh time"):
+        settle(too_big, "smoke", tmp_path / "meshes", tmp_path / "settle")
+    assert not (tmp_path / "settle" / "settle.log").exists()
+
+
+def test_a_blown_up_settle_fails_loudly_and_publishes_nothing(config, tmp_path):
+    """The real engine at 1.2 x the Rayleigh time, the guard lifted: particles
+    reach tens of m/s within a few thousand steps; the wrapper stops there."""
+    unstable = copy.deepcopy(config)
+    unstable["timestep"].update(rayleigh_fraction=1.2, max_rayleigh_fraction=100.0)
+    make_geometry(unstable, "smoke", tmp_path / "meshes")
+    with pytest.raises(LiggghtsError, match="kinetic-energy blow-up"):
+        settle(unstable, "smoke", tmp_path / "meshes", tmp_path / "settle")
+    published = {p.name for p in (tmp_path / "settle").iterdir()}
+    assert not published & {"settled.restart", "settled.dump", "health.json"}
