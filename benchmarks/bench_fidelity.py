@@ -81,6 +81,12 @@ def children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def short_error(err: Exception) -> str:
+    """The line of an error that says what broke: LIGGGHTS' ERROR line, or the first line."""
+    lines = str(err).splitlines()
+    return next((ln.strip() for ln in lines if "ERROR" in ln), lines[0] if lines else type(err).__name__)
+
+
 def run_scene(task) -> list[dict]:
     """Geometry, settle (seed ``replicate``) and every point's spread of one variant."""
     name, config, level, replicate, points = task
@@ -94,15 +100,15 @@ def run_scene(task) -> list[dict]:
         except LiggghtsError as err:  # a broken setting is a result too
             print(f"{name} seed {replicate}: settle failed: {err}", flush=True)
             return [{"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
-                     "error": str(err).splitlines()[0]} for U, omega in points]
+                     "error": short_error(err)} for U, omega in points]
         for U, omega in points:
             cpu0 = children_cpu()
             try:
                 health = spread(config, level, U, omega, tmp / "meshes", tmp / "settle", tmp / "run")
-            except LiggghtsError as err:
+            except (LiggghtsError, ValueError) as err:  # ValueError: e.g. an empty layer to measure
                 print(f"{name} seed {replicate} U={U:g} omega={omega:g}: failed: {err}", flush=True)
                 rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
-                             "cpu_s": children_cpu() - cpu0, "error": str(err).splitlines()[0]})
+                             "cpu_s": children_cpu() - cpu0, "error": short_error(err)})
                 continue
             cpu = children_cpu() - cpu0
             metrics = spread_layer_metrics(read_dump(tmp / "run" / "final.dump"), s.sampling_region, U * 1e-3,
@@ -113,6 +119,8 @@ def run_scene(task) -> list[dict]:
                          "particles": health["atoms"], "timestep_s": health["timestep_s"],
                          "heap_exhausted": health["heap_exhausted"],
                          "max_overlap_fraction": health["max_overlap_fraction"],
+                         "max_overlap_anywhere": health["max_overlap_anywhere"],
+                         "peak_speed_m_s": health["peak_speed_m_s"],
                          **{k: to_report_units(metrics)[k] for k in METRICS}})
             print(f"{name} seed {replicate} U={U:g} omega={omega:g}: {health['wall_s']:.1f} s, "
                   + ", ".join(f"{METRICS[k]} {rows[-1][k]:.4g}" for k in METRICS), flush=True)
