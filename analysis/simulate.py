@@ -40,6 +40,12 @@ BELOW_SUBSTRATE_RADII = 0.5
 #: harder (20 % seen at U = 40 mm/s); past 50 % spheres pass through each other.
 MAX_OVERLAP = 0.05
 MAX_OVERLAP_ANYWHERE = 0.5
+#: A run "blows up" when any particle moves faster than this many times the
+#: fastest wall (U + |omega| R), and at least BLOWUP_FLOOR_M_S (a fall from
+#: the top of the box is under 1 m/s). Checked on the thermo output during the
+#: run (every THERMO_EVERY steps), not only on the final state.
+BLOWUP_SPEED_FACTOR = 10
+BLOWUP_FLOOR_M_S = 2.0
 #: Largest share of the heap that may roll ahead, to the sampling region, while
 #: it slumps; these strays are removed before the spread (more: a scene error).
 MAX_STRAYS = 0.01
@@ -71,11 +77,14 @@ SKIN_DIAMETERS = 0.2
 REST_CHUNK_S = 0.005  # [s] between two at-rest checks
 
 
-def rest_loop(s: Scene, n_particles: int, max_time: float) -> dict:
-    """Template values for ``_until_rest.j2``: chunks of REST_CHUNK_S up to ``max_time``."""
+def rest_loop(s: Scene, max_time: float, stop_at_rest: bool = True) -> dict:
+    """Template values for ``_until_rest.j2``: chunks of REST_CHUNK_S up to ``max_time``,
+    stopping early (``stop_at_rest``) once the kinetic energy per particle [J] is
+    that of the RMS speed ``rest_rms_speed_mm_s``."""
     chunk = THERMO_EVERY * max(1, round(REST_CHUNK_S / s.timestep / THERMO_EVERY))
     return {"chunk_steps": chunk, "max_chunks": max(1, ceil(max_time / (chunk * s.timestep))),
-            "rest_speed": s.rest_speed, "rest_ke": 0.5 * n_particles * s.mean_particle_mass * s.rest_speed**2}
+            "rest_speed": s.rest_speed, "rest_ke": 0.5 * s.mean_particle_mass * s.rest_speed**2,
+            "stop_at_rest": stop_at_rest}
 
 
 def binsize(s: Scene) -> float:
@@ -157,7 +166,7 @@ def layer_health(atoms, s: Scene, substrate_stl, expected_atoms: int) -> dict:
     xyz = atoms[["x", "y", "z"]].to_numpy()
     radius = atoms["radius"].to_numpy()
     below = (xyz[:, 2] - substrate_height(substrate_stl)(xyz[:, 0], xyz[:, 1])) / radius
-    pairs = cKDTree(xyz, boxsize=None).query_pairs(2 * radius.max(), output_type="ndarray")
+    pairs = cKDTree(xyz, boxsize=None).query_pairs(2 * radius.max(initial=0.0), output_type="ndarray")
     gaps = np.linalg.norm(xyz[pairs[:, 0]] - xyz[pairs[:, 1]], axis=1) - radius[pairs].sum(1)
     overlaps = -gaps / radius[pairs].min(1)
     x0, x1, y0, y1 = s.sampling_region
@@ -187,6 +196,32 @@ def layer_health(atoms, s: Scene, substrate_stl, expected_atoms: int) -> dict:
     return health
 
 
+def check_kinetic_energy(log: dict, wall_speed: float = 0.0) -> dict:
+    """Refuse a run whose thermo output shows a non-finite kinetic energy or a
+    particle faster than the blow-up limit; ``wall_speed`` [m/s] is the fastest
+    wall (roller surface). Returns the peak particle speed [m/s]."""
+    thermo = log["thermo"]
+    limit = max(BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR * wall_speed)
+    energy, vmax = thermo["KinEng"].to_numpy(), thermo["vmax"].to_numpy()
+    bad = ~np.isfinite(energy) | ~np.isfinite(vmax)
+    if bad.any():
+        raise LiggghtsError(f"unsound run: kinetic energy not finite at step {int(thermo['Step'][bad].iloc[0])}")
+    fast = vmax > limit
+    if fast.any():
+        first = np.argmax(fast)
+        raise LiggghtsError(f"unsound run: kinetic-energy blow-up, a particle at {vmax[first]:.3g} m/s at step "
+                            f"{int(thermo['Step'].iloc[first])} (limit {limit:.3g} m/s = max({BLOWUP_FLOOR_M_S:g}, "
+                            f"{BLOWUP_SPEED_FACTOR} x the fastest wall's {wall_speed:.3g} m/s)): lower the time step")
+    return {"peak_speed_m_s": float(vmax.max(initial=0.0))}
+
+
+def through_roller(atoms, axis_x: float, axis_z: float, radius: float) -> int:
+    """Particles whose centre is inside the roller (axis along y at ``axis_x``,
+    ``axis_z`` [m], ``radius`` [m]): they passed through its surface."""
+    distance = np.hypot(atoms["x"].to_numpy() - axis_x, atoms["z"].to_numpy() - axis_z)
+    return int(np.sum(distance < radius))
+
+
 def _publish(out: Path, summary: dict, *names: str) -> None:
     """Rename the run's ``<name>.part`` files to ``<name>``, then write
     ``health.json``: a run killed or refused earlier leaves nothing that looks finished."""
@@ -196,13 +231,13 @@ def _publish(out: Path, summary: dict, *names: str) -> None:
     os.replace(out / "health.json.part", out / "health.json")
 
 
-def heap_supply(atoms, s: Scene) -> dict:
-    """Powder left ahead of the roller when it stops. None left means the heap
-    ran out before the roller reached the end of the sampling region (forward
-    rolling lays several layers and eats a small heap): the layer there is
-    supply-limited, its M_s and Q_s lower bounds of the scene's physics."""
-    ahead = int((atoms["x"].to_numpy() > s.travel_end).sum())
-    return {"particles_ahead_of_roller": ahead, "heap_exhausted": ahead == 0}
+def heap_supply(ahead: int) -> dict:
+    """Powder left ahead of the roller when it stops (``ahead`` particles). None
+    left means the heap ran out before the roller reached the end of the
+    sampling region (forward rolling lays several layers and eats a small
+    heap): the layer there is supply-limited, its M_s and Q_s lower bounds of
+    the scene's physics."""
+    return {"particles_ahead_of_roller": int(ahead), "heap_exhausted": ahead == 0}
 
 
 def _check_timestep(log: dict, s: Scene) -> None:
@@ -228,13 +263,14 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     text = render("settle.in.j2", s=s, contact=contact_model(s), seeds=seeds(config, s, replicate), box=[f"{v:.6g}" for v in s.box],
                   processors=processors_grid(s),
                   skin=skin(s), binsize=binsize(s), thermo_every=THERMO_EVERY,
-                  **(rest_loop(s, s.heap_particles, s.settle_time) if max_steps is None else
-                     {**rest_loop(s, s.heap_particles, s.settle_time), "chunk_steps": max_steps, "max_chunks": 1}),
+                  **(rest_loop(s, s.settle_time) if max_steps is None else
+                     {**rest_loop(s, s.settle_time), "chunk_steps": max_steps, "max_chunks": 1}),
                   substrate_stl=meshes / "substrate.stl", restart="settled.restart.part", dump="settled.dump.part",
                   stray_x=s.sampling_region[0] - max(s.diameters), max_strays=MAX_STRAYS)
     (out / "settle.in").write_text(text)
     log = run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks)
     _check_timestep(log, s)
+    peak = check_kinetic_energy(log)
     if log["inserted"] != s.heap_particles:
         raise LiggghtsError(f"inserted {log['inserted']} of {s.heap_particles} particles: the heap region is too "
                             "small for heap_particles (see fidelity level)")
@@ -250,7 +286,7 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     health["heap_toe_m"] = float(atoms["x"].max() + atoms["radius"].max())
     summary = {"wall_s": log["wall_s"], "steps": int(log["thermo"]["Step"].iloc[-1]),
                "timestep_s": s.timestep, "rayleigh_fraction": log["max_rayleigh_fraction"],
-               "hertz_fraction": log["max_hertz_fraction"], "inserted": log["inserted"], **health}
+               "hertz_fraction": log["max_hertz_fraction"], "inserted": log["inserted"], **peak, **health}
     _publish(out, summary, "settled.restart", "settled.dump")
     return summary
 
@@ -310,8 +346,18 @@ def checkpoint_plan(travel_steps: int, count: int, resume_step: int = 0) -> list
     return list(zip(steps, [resume_step or None] + steps[:-1]))
 
 
+#: What a spreading run leaves out because its scene does not need it (README:
+#: skips): the wait for a fixed duration once the layer is at rest, the powder
+#: pushed past the stopped roller, and every dump but the final one. (Settling
+#: once per replicate is the workflow's: rules/simulate.smk.) The empty set is
+#: the "no skips" baseline of benchmarks/bench_skips.py.
+SKIPS = frozenset({"stop_at_rest", "remove_ahead", "final_dump_only"})
+#: Dump interval [s of simulated time] of the baseline without ``final_dump_only``.
+BASELINE_DUMP_EVERY_S = 0.002
+
+
 def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: str | Path,
-           settled: str | Path, outdir: str | Path, movie_every: int = 0) -> dict:
+           settled: str | Path, outdir: str | Path, movie_every: int = 0, skips=SKIPS) -> dict:
     """Spread the settled heap at ``U_mm_s`` [mm/s] and ``omega_rad_s`` [rad/s].
 
     Writes ``spread.in``, ``spread.log``, ``final.dump`` and ``health.json``
@@ -336,13 +382,20 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
         raise LiggghtsError(f"roller start x = {x0:.4g} m puts the roller outside the box (x >= {s.box[0]:.4g} m)")
     travel_time = (s.travel_end - x0) / speed
     travel_steps = ceil(travel_time / s.timestep)
+    unknown = set(skips) - SKIPS
+    if unknown:
+        raise ValueError(f"unknown skip(s) {sorted(unknown)}; known: {sorted(SKIPS)}")
+    if not movie_every and "final_dump_only" not in skips:
+        movie_every = max(1, round(BASELINE_DUMP_EVERY_S / s.timestep))
     motion = roller_motion(speed, omega_rad_s, s.roller_radius)
     context = dict(s=s, contact=contact_model(s), box=[f"{v:.6g}" for v in s.box], U_mm_s=U_mm_s,
                    omega_rad_s=omega_rad_s, motion=motion, restart=settled / "settled.restart", skin=skin(s),
                    binsize=binsize(s), thermo_every=THERMO_EVERY, processors=processors_grid(s),
                    substrate_stl=meshes / "substrate.stl", roller_stl=meshes / "roller_shell.stl",
                    roller_z=s.roller_gap + s.roller_radius, travel_steps=travel_steps,
-                   **rest_loop(s, len(atoms0), s.rest_time), movie_every=movie_every, movie="movie.dump",
+                   **rest_loop(s, s.rest_time, stop_at_rest="stop_at_rest" in skips),
+                   travel_end=s.travel_end, remove_ahead="remove_ahead" in skips,
+                   movie_every=movie_every, movie="movie.dump",
                    dump="final.dump.part", checkpoint_dir=CHECKPOINT_DIR)
 
     def render_from(step: int, restart: Path | None) -> str:
@@ -369,9 +422,16 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
             print(f"warning: resuming from {restart} failed, trying an older checkpoint or a fresh start:\n{err}",
                   file=sys.stderr)
     _check_timestep(log, s)
+    health = check_kinetic_energy(log, wall_speed=speed + abs(omega_rad_s) * s.roller_radius)
     atoms = read_dump(out / "final.dump.part").atoms
-    health = layer_health(atoms, s, meshes / "substrate.stl", len(atoms0))
-    health.update(heap_supply(atoms, s))
+    inside = through_roller(atoms, x0 + speed * travel_steps * s.timestep, context["roller_z"], s.roller_radius)
+    if inside:
+        raise LiggghtsError(f"unsound run: {inside} particles passed through the roller (centre inside it): "
+                            "lower the time step or stiffen the particles")
+    ahead = int(log["printed"]["particles_ahead_of_roller"])
+    removed = ahead if "remove_ahead" in skips else 0
+    health.update(through_roller=inside, **layer_health(atoms, s, meshes / "substrate.stl", len(atoms0) - removed))
+    health.update(heap_supply(ahead), removed_ahead_of_roller=removed)
     thermo = log["thermo"]
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
     summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"],

@@ -1,0 +1,156 @@
+"""Skip what a scene does not need: each skip's saving and its effect on the layer.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_skips.py [--level default] [--points 40:-10,40:0,...] [--jobs 2]
+        [--name skips]
+
+Two arms over the same (U [mm/s], omega [rad/s]) points, measured in one invocation:
+
+* **all skips** (what the workflow does): the heap is settled once and every
+  run starts from that restart; a run ends when the roller has passed the
+  sampling region and the layer has come to rest; the powder pushed past the
+  stopped roller is removed; only the final state is dumped
+  (``analysis.simulate.SKIPS``).
+* **no skips**: every run settles its own heap (the same seed, so the same
+  heap), waits the full ``rest_time_s`` after the travel, keeps the powder
+  ahead of the roller and dumps every 2 ms of simulated time.
+
+Both arms of a point run back to back in one task, so they share the
+machine's load. The settle of the all-skips arm is counted once, spread over
+the points. The layer's four metrics are compared point by point; the
+seed-to-seed spread (another heap packing) of the same level is the yardstick
+(``--noise``: a CSV of bench_fidelity.py with several seeds).
+
+Writes ``benchmarks/measured/<name>.csv`` (one row per run) and ``<name>.md``.
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+from analysis.config import load_config, scene  # noqa: E402
+from analysis.dump import read_dump  # noqa: E402
+from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
+from analysis.simulate import SKIPS, make_geometry, settle, spread  # noqa: E402
+from benchmarks.bench_fidelity import METRICS, children_cpu  # noqa: E402
+
+DEFAULT_POINTS = ",".join(f"{U}:{w}" for U in (40, 70, 100) for w in (-10, 0, 10))
+
+
+def measure(config, level, run_dir, meshes, U):
+    s = scene(config, level)
+    metrics = spread_layer_metrics(read_dump(run_dir / "final.dump"), s.sampling_region, U * 1e-3, s.density,
+                                   substrate=meshes / "substrate.stl", n_lines=s.profilometer_lines,
+                                   seed=config["profilometer"]["seed"])
+    return {k: to_report_units(metrics)[k] for k in METRICS}
+
+
+def run_point(task) -> list[dict]:
+    config, level, meshes, settled, (U, omega) = task
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        cpu0 = children_cpu()
+        own = settle(config, level, meshes, tmp / "settle")
+        settle_cpu = children_cpu() - cpu0
+        for arm, skips, heap in (("no skips", frozenset(), tmp / "settle"), ("all skips", SKIPS, settled)):
+            cpu0 = children_cpu()
+            health = spread(config, level, U, omega, meshes, heap, tmp / arm.replace(" ", "_"), skips=skips)
+            cpu = children_cpu() - cpu0
+            rows.append({"arm": arm, "U_mm_s": U, "omega_rad_s": omega, "spread_wall_s": health["wall_s"],
+                         "spread_cpu_s": cpu, "steps": health["steps"], "final_atoms": health["atoms"],
+                         "settle_wall_s": own["wall_s"] if arm == "no skips" else 0.0,
+                         "settle_cpu_s": settle_cpu if arm == "no skips" else 0.0,
+                         **measure(config, level, tmp / arm.replace(" ", "_"), meshes, U)})
+        print(f"U={U:g} omega={omega:g}: " + ", ".join(
+            f"{r['arm']} {r['spread_wall_s'] + r['settle_wall_s']:.1f} s" for r in rows[-2:]), flush=True)
+    return rows
+
+
+def noise_floor(path: Path, level_scale: pd.Series) -> pd.Series | None:
+    """Mean seed-to-seed std of each metric (bench_fidelity CSV, its 'default' variant), relative."""
+    if not path.exists():
+        return None
+    runs = pd.read_csv(path)
+    runs = runs[(runs["variant"] == "default") & runs["error"].isna()] if "error" in runs else \
+        runs[runs["variant"] == "default"]
+    std = runs.groupby(["U_mm_s", "omega_rad_s"])[list(METRICS)].std().mean()
+    return std / runs[list(METRICS)].abs().mean()
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--level", default="default")
+    parser.add_argument("--points", default=DEFAULT_POINTS, help="U:omega pairs, mm/s:rad/s")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--noise", default=str(ROOT / "benchmarks/measured/fidelity_pass1.csv"))
+    parser.add_argument("--name", default="skips")
+    args = parser.parse_args(argv)
+    config = load_config(ROOT / "config.yaml")
+    points = [tuple(float(v) for v in p.split(":")) for p in args.points.split(",")]
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        make_geometry(config, args.level, tmp / "meshes")
+        cpu0 = children_cpu()
+        shared = settle(config, args.level, tmp / "meshes", tmp / "settle")
+        shared_cpu = children_cpu() - cpu0
+        tasks = [(config, args.level, tmp / "meshes", tmp / "settle", p) for p in points]
+        with ProcessPoolExecutor(args.jobs) as pool:
+            runs = pd.DataFrame([row for rows in pool.map(run_point, tasks) for row in rows])
+    share = runs["arm"] == "all skips"
+    runs.loc[share, "settle_wall_s"] = shared["wall_s"] / len(points)
+    runs.loc[share, "settle_cpu_s"] = shared_cpu / len(points)
+    runs["wall_s"] = runs["spread_wall_s"] + runs["settle_wall_s"]
+    runs["cpu_s"] = runs["spread_cpu_s"] + runs["settle_cpu_s"]
+    out = ROOT / "benchmarks" / "measured"
+    runs.to_csv(out / f"{args.name}.csv", index=False)
+
+    totals = runs.groupby("arm")[["wall_s", "cpu_s", "settle_wall_s", "spread_wall_s", "steps", "final_atoms"]].agg(
+        {"wall_s": "sum", "cpu_s": "sum", "settle_wall_s": "sum", "spread_wall_s": "sum", "steps": "mean",
+         "final_atoms": "mean"})
+    speedup = totals.loc["no skips", "wall_s"] / totals.loc["all skips", "wall_s"]
+    pivot = runs.pivot_table(index=["U_mm_s", "omega_rad_s"], columns="arm", values=list(METRICS))
+    diff = pd.DataFrame({METRICS[k]: (pivot[(k, "all skips")] - pivot[(k, "no skips")]).abs()
+                         / runs[k].abs().mean() for k in METRICS})
+    floor = noise_floor(Path(args.noise), runs[list(METRICS)].abs().mean())
+    lines = [f"# Skips at the `{args.level}` level",
+             "",
+             f"Machine: {platform.node()} ({platform.machine()}, 2 cores), date: {time.strftime('%Y-%m-%d')}, "
+             f"{args.jobs} jobs, {time.perf_counter() - started:.0f} s in all. Command: "
+             f"`.venv/bin/python benchmarks/bench_skips.py --level {args.level} --points {args.points}`",
+             "",
+             f"{len(points)} points; both arms of a point ran back to back in one job.",
+             "",
+             totals.round(1).to_markdown(),
+             "",
+             f"**All skips: {speedup:.2f}x less wall time than none** (settling: "
+             f"{totals.loc['no skips', 'settle_wall_s'] / totals.loc['all skips', 'settle_wall_s']:.0f}x; "
+             f"spreading: {totals.loc['no skips', 'spread_wall_s'] / totals.loc['all skips', 'spread_wall_s']:.2f}x).",
+             "",
+             "Metric change, |all skips - no skips| / mean |metric|, per point:",
+             "",
+             diff.map(lambda v: f"{v:.1%}").to_markdown(),
+             "",
+             "Mean: " + ", ".join(f"{m} {v:.1%}" for m, v in diff.mean().items())]
+    if floor is not None:
+        lines += ["", "Seed-to-seed spread of the same level (noise floor, from "
+                  f"`{Path(args.noise).name}`): " + ", ".join(f"{METRICS[k]} {v:.1%}" for k, v in floor.items())]
+    text = "\n".join(lines) + "\n"
+    (out / f"{args.name}.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
