@@ -1,0 +1,309 @@
+"""Replicates, noise floor, candidate surrogates with a predictive std, cross-validated choice,
+uncertainty maps and the recommendation's margin: on synthetic data whose truth is known."""
+
+import runpy
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import synthetic_dataset, synthetic_metrics
+
+from analysis.maps import render_maps
+from analysis.model_choice import (DEFAULT_CHOICE, GPSurrogate, MLPEnsemble, TreeEnsemble,
+                                   choose_model, cross_validate_models, make_candidate,
+                                   model_choice_markdown, read_choice, write_model_choice)
+from analysis.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown
+from analysis.recommend import main, recommend
+from analysis.surrogate import (METRICS, inputs_of, point_folds, point_groups, point_means,
+                                predict_grid, predict_with_std, save_surrogate, split_runs,
+                                targets_of)
+
+NOISE = 0.05          # relative std of the synthetic runs' noise
+
+
+def replicated(n_rep, noise, seed=0, metrics=synthetic_metrics):
+    """The synthetic 45-point design with n_rep noisy replicates per point, as the dataset orders them."""
+    parts = [synthetic_dataset(seed + r, noise=noise, metrics=metrics).assign(replicate=r)
+             for r in range(n_rep)]
+    return (pd.concat(parts).sort_values(["U_mm_s", "omega_rad_s", "replicate"], ignore_index=True))
+
+
+@pytest.fixture(scope="module")
+def dense():
+    """400 random off-grid speeds and the noise-free metrics there, (n, 2) and (n, 4)."""
+    rng = np.random.default_rng(5)
+    X = np.c_[rng.uniform(40, 100, 400), rng.uniform(-20, 20, 400)]
+    return X, np.column_stack(list(synthetic_metrics(X[:, 0], X[:, 1]).values()))
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    return synthetic_dataset(3, noise=NOISE)
+
+
+@pytest.fixture(scope="module")
+def gp(noisy):
+    return GPSurrogate().fit(inputs_of(noisy), targets_of(noisy))
+
+
+# --- replicates --------------------------------------------------------------------------
+
+def test_replicates_of_a_point_never_straddle_train_and_test():
+    df = replicated(3, 0.02)
+    train, test = split_runs(df, 10, 0)
+    assert len(test) == 30 and len(train) == 105
+    groups = point_groups(df)
+    assert not set(groups[train]) & set(groups[test])
+    assert len(np.unique(groups[test])) == 10
+    for tr, te in point_folds(df, 5, 0):
+        assert not set(groups[tr]) & set(groups[te])
+        assert len(te) % 3 == 0
+
+
+def test_one_replicate_split_is_the_plain_row_split(dataset):
+    from sklearn.model_selection import KFold, train_test_split
+    _, test = train_test_split(np.arange(45), test_size=10, random_state=0)
+    assert split_runs(dataset, 10, 0)[1].tolist() == sorted(test)
+    plain = list(KFold(5, shuffle=True, random_state=2).split(np.arange(45)))
+    for (a_tr, a_te), (b_tr, b_te) in zip(point_folds(dataset, 5, 2), plain):
+        assert a_te.tolist() == sorted(b_te)
+
+
+def test_point_means_average_the_replicates():
+    df = replicated(4, 0.05)
+    points, split = point_means(df, split_runs(df, 10, 0))
+    assert len(points) == 45 and (points["n_replicates"] == 4).all()
+    first = df[(df.U_mm_s == 40) & (df.omega_rad_s == -20)]
+    row = points[(points.U_mm_s == 40) & (points.omega_rad_s == -20)].iloc[0]
+    assert row["porosity_pct"] == pytest.approx(first["porosity_pct"].mean())
+    assert row["porosity_pct_sd"] == pytest.approx(first["porosity_pct"].std())
+    assert (len(split[0]), len(split[1])) == (35, 10)
+
+
+# --- noise floor --------------------------------------------------------------------------
+
+def test_noise_floor_recovers_the_known_noise():
+    rel = 0.03
+    df = replicated(4, rel)
+    table = noise_floor(df)
+    assert len(table) == 45 + 1 and table["point"].iloc[-1] == POOLED
+    pooled = table.iloc[-1]
+    for m in METRICS:
+        assert pooled[f"{m}_rel_pct"] == pytest.approx(100 * rel, rel=0.15), m
+        per_point = table.iloc[:-1][f"{m}_rel_pct"]
+        assert per_point.median() == pytest.approx(100 * rel, rel=0.3), m
+    ceiling = accuracy_ceiling(df)
+    for m in METRICS:
+        c = ceiling[m]
+        # MAPE of a perfect model = E|eps| = sqrt(2/pi) x relative noise
+        assert c["MAPE_floor_pct"] == pytest.approx(100 * rel * np.sqrt(2 / np.pi), rel=0.2), m
+        assert 0 < c["R2_max"] < 1 and c["R_max"] == pytest.approx(np.sqrt(c["R2_max"]))
+    assert "| **pooled** | 180 |" in noise_floor_markdown(table)
+
+
+def test_no_noise_floor_without_replicates(dataset):
+    assert noise_floor(dataset).empty
+    assert accuracy_ceiling(dataset) is None
+    assert "sweep.replicates" in noise_floor_markdown(noise_floor(dataset))
+
+
+# --- candidates recover a known function ---------------------------------------------------
+
+def _relative_rmse(pred, truth):
+    return np.sqrt(((pred - truth) ** 2).mean(axis=0)) / np.abs(truth).mean(axis=0)
+
+
+def test_gp_recovers_the_function_within_the_noise(gp, dense):
+    X, truth = dense
+    mean, std = gp.predict(X, return_std=True)
+    err = _relative_rmse(mean, truth)
+    assert (err < NOISE).all(), err              # 45 noisy runs average below a run's noise
+    assert (err < 0.6 * NOISE).mean() >= 0.5, err
+    # its white-noise term finds the runs' noise (relative 5 % of each value)
+    found = gp.noise_std_ / (NOISE * np.abs(truth).mean(axis=0))
+    assert ((found > 0.6) & (found < 1.6)).all(), found
+    # fitted length scales: short in omega (the multi-layer jump), in input units
+    assert gp.length_scales_.shape == (4, 2)
+
+
+def test_gp_std_covers_the_truth_at_about_the_nominal_rate(gp, dense):
+    X, truth = dense
+    mean, std = gp.predict(X, return_std=True)
+    z = np.abs(mean - truth) / std
+    assert 0.5 < (z < 1).mean() < 0.9                # nominal 68 %
+    assert (z < 2).mean() > 0.82                      # nominal 95 %
+    assert (std > 0).all()
+
+
+def test_mlp_ensemble_recovers_the_function_within_the_noise(noisy, dense, fit_params):
+    X, truth = dense
+    ens = MLPEnsemble(fit_params, n_members=3).fit(inputs_of(noisy), targets_of(noisy))
+    mean, std = ens.predict(X, return_std=True)
+    err = _relative_rmse(mean, truth)
+    assert (err < NOISE).all(), err
+    assert (std > 0).all() and len(ens.members_) == 3
+    # members differ only by their random seeds
+    seeds = {m[-1].regressor.mlp.random_state for m in ens.members_}
+    assert seeds == {0, 3, 6}
+
+
+def test_trees_give_a_spread_and_a_rough_fit(noisy, dense):
+    X, truth = dense
+    trees = TreeEnsemble(100).fit(inputs_of(noisy), targets_of(noisy))
+    mean, std = trees.predict(X, return_std=True)
+    assert (_relative_rmse(mean, truth) < 3 * NOISE).all()
+    assert std.shape == (400, 4) and (std.mean(axis=0) > 0).all()
+
+
+def test_predict_with_std_needs_a_model_with_std(fitted, gp):
+    with pytest.raises(ValueError, match="no predictive standard deviation"):
+        predict_with_std(fitted[0], [70.0], [0.0])
+    mean, std = predict_with_std(gp, [70.0, 85.0], [0.0, -5.0])
+    assert mean.shape == std.shape == (2, 4)
+
+
+def test_unknown_model_is_refused(fit_params):
+    with pytest.raises(ValueError, match="'svm'"):
+        make_candidate("svm", fit_params)
+
+
+# --- cross-validated choice ----------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def cv_small(fit_params):
+    """The CV table of all three candidates on a 3-replicate, 15-point design (quick settings)."""
+    def metrics(U, omega):
+        return synthetic_metrics(U, omega)
+    df = replicated(2, 0.03, metrics=metrics)
+    df = df[df.omega_rad_s.isin([-20, -10, 0, 10, 20])].reset_index(drop=True)   # 25 points
+    params = {**fit_params, **DEFAULT_CHOICE, "hidden_units": 50, "mlp_members": 2,
+              "cv_repeats": 2, "cv_folds": 5, "gp_restarts": 0, "tree_count": 50}
+    return df, params, cross_validate_models(df, params)
+
+
+def test_cv_table_has_every_model_scheme_and_metric(cv_small):
+    df, params, table = cv_small
+    assert len(table) == 3 * 2 * 4
+    assert set(table["model"]) == {"mlp", "gp", "trees"}
+    assert set(table["scheme"]) == {"kfold", "loo"}
+    assert np.isfinite(table[["R", "R2", "MAPE_pct", "R_sd", "R2_sd"]].to_numpy()).all()
+    assert (table.loc[table.scheme == "kfold", "n_splits"] == 10).all()      # 5 folds x 2 repeats
+    assert (table.loc[table.scheme == "loo", "n_splits"] == 25).all()        # one per point
+    # on a smooth function every candidate is far better than the mean
+    assert (table.groupby("model")["R2"].mean() > 0.8).all()
+    # the GP is at or near the noise ceiling of these runs
+    ceiling = accuracy_ceiling(df)
+    gp = table[(table.model == "gp") & (table.scheme == "kfold")].set_index("metric")
+    for m in ("roughness_um", "porosity_pct"):
+        assert gp.loc[m, "R2"] <= ceiling[m]["R2_max"] + 0.02
+        assert gp.loc[m, "R2"] > ceiling[m]["R2_max"] - 0.1
+
+
+def test_choice_is_the_best_mean_kfold_r2_and_is_written(cv_small, tmp_path):
+    _, params, table = cv_small
+    chosen, ranking = choose_model(table, params["models"])
+    kfold = table[table.scheme == "kfold"].groupby("model")["R2"].mean()
+    assert chosen == kfold.idxmax() and ranking.index[0] == chosen
+    write_model_choice(table, chosen, tmp_path / "c.csv", tmp_path / "c.md")
+    name, back = read_choice(tmp_path / "c.csv")
+    assert name == chosen and len(back) == len(table)
+    assert f"Chosen: **{chosen}**" in (tmp_path / "c.md").read_text()
+
+
+def test_ties_go_to_the_first_listed_model():
+    rows = [{"model": m, "scheme": "kfold", "metric": x, "R2": 0.9} for m in ("gp", "trees")
+            for x in METRICS]
+    assert choose_model(pd.DataFrame(rows), ["trees", "gp"])[0] == "trees"
+    assert choose_model(pd.DataFrame(rows), ["gp", "trees"])[0] == "gp"
+
+
+def test_markdown_puts_the_noise_ceiling_beside_the_scores(cv_small):
+    df, params, table = cv_small
+    text = model_choice_markdown(table, "gp", accuracy_ceiling(df), "smoke")
+    assert "| **gp** | kfold |" in text and "| *noise ceiling* | replicates |" in text
+    assert "not measured" in model_choice_markdown(table, "gp", None)
+
+
+def test_scripts_write_noise_floor_and_model_choice(tmp_path, fake_snakemake, fit_params):
+    df = replicated(2, 0.03)
+    df = df[df.omega_rad_s.isin([-20, 0, 20])].reset_index(drop=True)
+    df.to_csv(tmp_path / "dataset.csv", index=False)
+    smk = fake_snakemake({"dataset": str(tmp_path / "dataset.csv")},
+                         {"csv": str(tmp_path / "nf.csv"), "md": str(tmp_path / "nf.md")},
+                         {"level": "smoke"})
+    runpy.run_path(str(smk.scriptdir / "noise_floor.py"), init_globals={"snakemake": smk})
+    assert len(pd.read_csv(tmp_path / "nf.csv")) == 15 + 1
+    params = {**fit_params, **DEFAULT_CHOICE, "models": ["gp", "trees"], "cv_repeats": 1,
+              "cv_folds": 3, "cv_loo": False, "tree_count": 20}
+    smk = fake_snakemake({"dataset": str(tmp_path / "dataset.csv")},
+                         {"csv": str(tmp_path / "mc.csv"), "md": str(tmp_path / "mc.md")},
+                         {"surrogate": params, "level": "smoke"})
+    runpy.run_path(str(smk.scriptdir / "model_choice.py"), init_globals={"snakemake": smk})
+    name, table = read_choice(tmp_path / "mc.csv")
+    assert name in ("gp", "trees") and len(table) == 2 * 4
+    assert "noise ceiling" in (tmp_path / "mc.md").read_text()
+
+
+# --- uncertainty on the maps and in the recommendation ---------------------------------------
+
+def test_grid_and_maps_carry_the_predictive_std(gp, noisy, tmp_path):
+    grid = predict_grid(gp, (40, 100), (-20, 20), 11)
+    for m in METRICS:
+        assert (grid[f"{m}_std"] > 0).all()
+    assert (grid["throughput_index_std"] > 0).all() and (grid["defect_index_std"] >= 0).all()
+    # the std grows away from the runs
+    at_run = gp.predict(np.array([[70.0, 0.0]]), return_std=True)[1]
+    beyond = gp.predict(np.array([[130.0, 30.0]]), return_std=True)[1]
+    assert (beyond > 2 * at_run).all()
+    train, test = split_runs(noisy, 10, 0)
+    paths = render_maps(gp, noisy, (train, test), tmp_path / "maps", n=15)
+    names = {p.name for p in paths}
+    assert {f"{m}_std.png" for m in METRICS} <= names and "process_map.svg" in names
+    assert "predictive std" in (tmp_path / "maps" / "process_map.svg").read_text()
+
+
+def monotone(U, omega):
+    """As tests/test_recommend.py: under porosity <= P the best U is (P - 20)/0.2 at omega -20."""
+    U, omega = np.asarray(U, float), np.asarray(omega, float)
+    return {"mass_g": 0.01 + 1e-4 * U, "throughput_mm2_s": 10 + 0.3 * U - 0.1 * omega,
+            "roughness_um": 40 + 0.05 * omega**2, "porosity_pct": 20 + 0.2 * U}
+
+
+@pytest.fixture(scope="module")
+def monotone_gp(tmp_path_factory):
+    df = synthetic_dataset(1, noise=0.02, metrics=monotone)
+    model = GPSurrogate().fit(inputs_of(df), targets_of(df))
+    meta = {"input_range": {"U_mm_s": [40.0, 100.0], "omega_rad_s": [-20.0, 20.0]}}
+    path = tmp_path_factory.mktemp("gp") / "model.joblib"
+    save_surrogate(model, path, meta)
+    return model, meta, path
+
+
+def test_margin_keeps_the_answer_inside_the_limit_by_k_std(monotone_gp):
+    model, meta = monotone_gp[:2]
+    plain = recommend(model, meta, 34.0, margin=0)
+    safe = recommend(model, meta, 34.0, margin=2)
+    assert plain["margin"] == 0 and safe["margin"] == 2 and safe["meets_margin"]
+    assert plain["U_mm_s"] == pytest.approx(70.0, abs=2.0)
+    assert safe["porosity_pct"] + 2 * safe["porosity_pct_std"] <= 34.0
+    assert safe["U_mm_s"] < plain["U_mm_s"]                       # backs off from the limit
+    assert 0 < safe["porosity_pct_std"] < 1.0
+    assert safe["n_feasible"] < plain["n_feasible"] == plain["n_feasible_mean"]
+
+
+def test_a_margin_that_rules_out_everything_is_said(monotone_gp, capsys):
+    model, meta, path = monotone_gp
+    found = recommend(model, meta, 28.3, margin=50)
+    assert found is not None and not found["meets_margin"] and found["n_feasible"] == 0
+    assert main(["--max-porosity", "28.3", "--margin", "50", "--model", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert "none by a margin of 50 predictive std" in out and "lower --margin" in out
+    assert main(["--max-porosity", "34", "--model", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "mean + 1 predictive std" in out and "Phi = 3" in out and "+- " in out
+
+
+def test_bad_margin_exits_2(monotone_gp, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--max-porosity", "34", "--margin", "-1", "--model", str(monotone_gp[2])])
+    assert exit_.value.code == 2 and "-1" in capsys.readouterr().err
