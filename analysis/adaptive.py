@@ -132,6 +132,12 @@ def initial_design(n, bounds, resolution, method="sobol", seed=0):
     return unique[:n]
 
 
+def _keys(points):
+    """Hashable, sortable keys of (n, 2) points (rounded to 1e-6): U + i omega."""
+    P = np.round(np.atleast_2d(np.asarray(points, float)), 6)
+    return P[:, 0] + 1j * P[:, 1]
+
+
 def _scaled_nearest(gp, X_query, X_points):
     """Index of the nearest of ``X_points`` to each query, in standardised input units."""
     a, b = gp.x_scaler_.transform(X_query), gp.x_scaler_.transform(X_points)
@@ -170,7 +176,7 @@ def choose_batch(gp, X, candidates, batch_size, error_weight=0.5, exclude=None):
     e2_run = np.sum((gp.loo_residuals() / gp.y_scale_) ** 2, axis=1)
     e2 = np.bincount(inverse.ravel(), weights=e2_run) / np.bincount(inverse.ravel())
     taken = points if exclude is None else np.r_[points, np.atleast_2d(exclude)]
-    keep = ~(np.abs(candidates[:, None, :] - taken[None, :, :]).max(axis=2) < 1e-9).any(axis=1)
+    keep = ~np.isin(_keys(candidates), _keys(taken))
     cand = candidates[keep]
     if len(cand) < batch_size:
         raise ValueError(f"only {len(cand)} candidate points left for a batch of {batch_size}")
@@ -277,7 +283,7 @@ def run_adaptive(evaluate, bounds, settings, *, replicates=1, exclude=None, gp_p
     points = initial_design(settings["initial_points"], bounds, resolution,
                             settings["initial_design"], settings["seed"])
     if exclude is not None and len(exclude):
-        clash = (np.abs(points[:, None, :] - np.asarray(exclude)[None]).max(axis=2) < 1e-9).any(1)
+        clash = np.isin(_keys(points), _keys(exclude))
         if clash.any():
             raise ValueError(f"initial design points {points[clash].tolist()} are in the "
                              "excluded (held-out) set; change adaptive.seed")
