@@ -86,8 +86,10 @@ def main(argv=None) -> int:
     shown = runs.reindex(columns=cols)
     header = (f"# Stress test at the `{args.level}` level\n\n"
               f"Machine: {platform.node()} ({platform.processor() or platform.machine()}), "
-              f"date: {time.strftime('%Y-%m-%d')}, {args.jobs} jobs, {time.perf_counter() - started:.0f} s in all. "
-              f"Command: `.venv/bin/python benchmarks/bench_stress.py --level {args.level}`\n\n"
+              f"date: {time.strftime('%Y-%m-%d')}, {args.jobs} jobs, "
+              + (f"rows of {names} re-run with --update. " if args.update else
+                 f"{time.perf_counter() - started:.0f} s in all. ")
+              + f"Command: `.venv/bin/python benchmarks/bench_stress.py --level {args.level}`\n\n"
               "Overlaps are fractions of the smaller radius (limits: 5 % in the sampling region, 50 % anywhere); "
               "peak speed is the fastest particle in the thermo output over the whole run.\n\n")
     (out / f"{args.name}.md").write_text(header + shown.to_markdown(index=False, floatfmt=".4g") + "\n")
