@@ -95,7 +95,16 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--noise", default=str(ROOT / "benchmarks/measured/fidelity_pass1.csv"))
     parser.add_argument("--name", default="skips")
+    parser.add_argument("--summarise", action="store_true",
+                        help="only re-write <name>.md from the runs in <name>.csv")
     args = parser.parse_args(argv)
+    out = ROOT / "benchmarks" / "measured"
+    if args.summarise:
+        runs = pd.read_csv(out / f"{args.name}.csv")
+        text = summarise(runs, args, elapsed=None)
+        (out / f"{args.name}.md").write_text(text)
+        print(text)
+        return 0
     config = load_config(ROOT / "config.yaml")
     points = [tuple(float(v) for v in p.split(":")) for p in args.points.split(",")]
     started = time.perf_counter()
@@ -113,30 +122,37 @@ def main(argv=None) -> int:
     runs.loc[share, "settle_cpu_s"] = shared_cpu / len(points)
     runs["wall_s"] = runs["spread_wall_s"] + runs["settle_wall_s"]
     runs["cpu_s"] = runs["spread_cpu_s"] + runs["settle_cpu_s"]
-    out = ROOT / "benchmarks" / "measured"
     runs.to_csv(out / f"{args.name}.csv", index=False)
+    text = summarise(runs, args, elapsed=time.perf_counter() - started)
+    (out / f"{args.name}.md").write_text(text)
+    print(text)
+    return 0
 
-    totals = runs.groupby("arm")[["wall_s", "cpu_s", "settle_wall_s", "spread_wall_s", "steps", "final_atoms"]].agg(
-        {"wall_s": "sum", "cpu_s": "sum", "settle_wall_s": "sum", "spread_wall_s": "sum", "steps": "mean",
+
+def summarise(runs: pd.DataFrame, args, elapsed: float | None) -> str:
+    """The Markdown table: totals per arm, the ratios, the metric changes per point."""
+    points = runs[["U_mm_s", "omega_rad_s"]].drop_duplicates()
+    totals = runs.groupby("arm")[["wall_s", "cpu_s", "settle_cpu_s", "spread_cpu_s", "steps", "final_atoms"]].agg(
+        {"wall_s": "sum", "cpu_s": "sum", "settle_cpu_s": "sum", "spread_cpu_s": "sum", "steps": "mean",
          "final_atoms": "mean"})
-    speedup = totals.loc["no skips", "wall_s"] / totals.loc["all skips", "wall_s"]
+    ratio = lambda col: totals.loc["no skips", col] / totals.loc["all skips", col]  # noqa: E731
     pivot = runs.pivot_table(index=["U_mm_s", "omega_rad_s"], columns="arm", values=list(METRICS))
     diff = pd.DataFrame({METRICS[k]: (pivot[(k, "all skips")] - pivot[(k, "no skips")]).abs()
                          / runs[k].abs().mean() for k in METRICS})
-    floor = noise_floor(Path(args.noise), runs[list(METRICS)].abs().mean())
+    floor = noise_floor(Path(args.noise), None)
     lines = [f"# Skips at the `{args.level}` level",
              "",
              f"Machine: {platform.node()} ({platform.machine()}, 2 cores), date: {time.strftime('%Y-%m-%d')}, "
-             f"{args.jobs} jobs, {time.perf_counter() - started:.0f} s in all. Command: "
+             f"{args.jobs} jobs" + (f", {elapsed:.0f} s in all" if elapsed else "") + ". Command: "
              f"`.venv/bin/python benchmarks/bench_skips.py --level {args.level} --points {args.points}`",
              "",
-             f"{len(points)} points; both arms of a point ran back to back in one job.",
+             f"{len(points)} points; both arms of a point ran back to back in one job. CPU time is LIGGGHTS' own "
+             "(the children's user + system time): it does not depend on what else the machine runs, wall time does.",
              "",
              totals.round(1).to_markdown(),
              "",
-             f"**All skips: {speedup:.2f}x less wall time than none** (settling: "
-             f"{totals.loc['no skips', 'settle_wall_s'] / totals.loc['all skips', 'settle_wall_s']:.0f}x; "
-             f"spreading: {totals.loc['no skips', 'spread_wall_s'] / totals.loc['all skips', 'spread_wall_s']:.2f}x).",
+             f"**All skips: {ratio('cpu_s'):.2f}x less CPU time than none** (wall: {ratio('wall_s'):.2f}x; "
+             f"settling: {ratio('settle_cpu_s'):.0f}x; spreading: {ratio('spread_cpu_s'):.2f}x).",
              "",
              "Metric change, |all skips - no skips| / mean |metric|, per point:",
              "",
@@ -146,10 +162,7 @@ def main(argv=None) -> int:
     if floor is not None:
         lines += ["", "Seed-to-seed spread of the same level (noise floor, from "
                   f"`{Path(args.noise).name}`): " + ", ".join(f"{METRICS[k]} {v:.1%}" for k, v in floor.items())]
-    text = "\n".join(lines) + "\n"
-    (out / f"{args.name}.md").write_text(text)
-    print(text)
-    return 0
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
