@@ -8,6 +8,8 @@ simulation starts.
 from __future__ import annotations
 
 import copy
+import hashlib
+import json
 from dataclasses import dataclass
 from math import erf, pi, sqrt
 from pathlib import Path
@@ -122,6 +124,23 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
     if config["surrogate"]["n_test"] > n_points - 3:
         _fail("surrogate.n_test", config["surrogate"]["n_test"],
               f"leaves fewer than 3 of the sweep's {n_points} (U, omega) points to train on")
+
+
+#: Fidelity keys that say how a run is executed, not what it computes.
+EXECUTION_KEYS = ("mpi_ranks", "runtime_min", "mem_mb_per_rank", "checkpoints_per_run", "profilometer_lines")
+#: Top-level sections whose values a settle or spread computes with.
+SIMULATION_SECTIONS = ("random_seed", "material", "psd", "roller", "substrate", "rest_rms_speed_mm_s", "timestep")
+
+
+def simulation_fingerprint(config: dict, level: str, sections=SIMULATION_SECTIONS) -> str:
+    """A short hash of everything in ``config`` that a simulation of ``level``
+    computes with (``sections`` and the level's fidelity keys but
+    EXECUTION_KEYS). The workflow passes it as a rule parameter, so that
+    Snakemake re-runs the simulations when the physics changes (and not when
+    only the MPI ranks or the cluster limits do)."""
+    relevant = {key: config.get(key) for key in sections}
+    relevant["fidelity"] = {k: v for k, v in config["fidelity"][level].items() if k not in EXECUTION_KEYS}
+    return hashlib.sha256(json.dumps(relevant, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def run_name(U: float, omega: float, replicate: int) -> str:

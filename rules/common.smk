@@ -1,5 +1,6 @@
 # Shared by every rule file: the checked configuration, the fidelity level and the runs.
-from analysis.config import ConfigError, design_points, load_config, run_name, scene  # noqa: E402
+from analysis.config import (ConfigError, design_points, load_config, run_name, scene,  # noqa: E402
+                             simulation_fingerprint)
 
 try:
     CONFIG = load_config(config, base_dir=workflow.basedir)
@@ -8,6 +9,11 @@ except ConfigError as err:
 
 LEVEL = CONFIG["level"]
 SCENE = scene(CONFIG, LEVEL)
+# Rule parameters that change when the physics of the level does: Snakemake then re-runs
+# the geometry, settle and spread (but not for MPI ranks or cluster limits).
+GEOMETRY_FINGERPRINT = simulation_fingerprint(CONFIG, LEVEL, sections=("roller", "substrate"))
+SIMULATION_FINGERPRINT = simulation_fingerprint(CONFIG, LEVEL)
+PROFILOMETER = {**CONFIG["profilometer"], "lines": SCENE.profilometer_lines}
 OUT = f"results/{LEVEL}"
 LOGS = f"results/logs/{LEVEL}"
 BENCH = f"results/benchmarks/{LEVEL}"

@@ -7,6 +7,7 @@ rule geometry:
         summary=f"{OUT}/meshes/geometry.json",
     params:
         level=LEVEL,
+        physics=GEOMETRY_FINGERPRINT,
     log:
         f"{LOGS}/geometry.log",
     benchmark:

@@ -7,6 +7,7 @@ rule layer_metrics:
         f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/metrics.json",
     params:
         level=LEVEL,
+        profilometer=PROFILOMETER,
     log:
         f"{LOGS}/metrics/U{{U}}_w{{omega}}_r{{rep}}.log",
     benchmark:

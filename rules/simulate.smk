@@ -8,6 +8,7 @@ rule settle:
         health=f"{OUT}/settle/r{{rep}}/health.json",
     params:
         level=LEVEL,
+        physics=SIMULATION_FINGERPRINT,
     threads: SCENE.mpi_ranks
     resources:
         mpi=SCENE.mpi_ranks if SCENE.mpi_ranks > 1 else None,  # SLURM plugin: mpi means tasks > 1
@@ -35,6 +36,7 @@ rule spread:
         health=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/health.json",
     params:
         level=LEVEL,
+        physics=SIMULATION_FINGERPRINT,
     threads: SCENE.mpi_ranks
     resources:
         mpi=SCENE.mpi_ranks if SCENE.mpi_ranks > 1 else None,  # SLURM plugin: mpi means tasks > 1

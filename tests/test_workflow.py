@@ -3,6 +3,7 @@ and report, then a sweep extended and interrupted, resumed without redoing
 finished runs."""
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -130,3 +131,16 @@ def test_spread_on_two_mpi_ranks_through_the_workflow_matches_one_rank(workflow)
     two = json.loads((run / "metrics.json").read_text())
     for key, tolerance in SEED_SPREAD.items():
         assert abs(two[key] - one[key]) <= tolerance, (key, one[key], two[key])
+
+
+def test_changed_physics_reruns_the_simulations_but_more_ranks_do_not(workflow):
+    """Snakemake sees the level's physics as a rule parameter: a new restitution
+    plans the settle and all six spreads again; more MPI ranks plan nothing."""
+    def planned(*config):
+        proc = subprocess.run([*snakemake_cmd(workflow, FIRST_U), *config, "--dry-run"], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        counts = dict(re.findall(r"^(\w+)\s+(\d+)$", proc.stdout + proc.stderr, re.MULTILINE))
+        return {rule: int(n) for rule, n in counts.items()}
+    physics = planned('material={"restitution": 0.5}')
+    assert physics.get("settle") == 1 and physics.get("spread") == 6
+    assert "spread" not in planned('fidelity={"smoke": {"mpi_ranks": 2}}')
