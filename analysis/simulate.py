@@ -42,8 +42,10 @@ MAX_OVERLAP = 0.05
 MAX_OVERLAP_ANYWHERE = 0.5
 #: A run "blows up" when any particle moves faster than this many times the
 #: fastest wall (U + |omega| R), and at least BLOWUP_FLOOR_M_S (a fall from
-#: the top of the box is under 1 m/s). Checked on the thermo output during the
-#: run (every THERMO_EVERY steps), not only on the final state.
+#: the top of the box is under 1 m/s; particles squeezed out under the roller
+#: reach 0.9 m/s in sound runs, 34 m/s in unstable ones: benchmarks/measured/stress.md).
+#: Checked on the thermo output during the run (every THERMO_EVERY steps), not
+#: only on the final state.
 BLOWUP_SPEED_FACTOR = 10
 BLOWUP_FLOOR_M_S = 2.0
 #: Largest share of the heap that may roll ahead, to the sampling region, while
