@@ -87,10 +87,18 @@ def short_error(err: Exception) -> str:
     return next((ln.strip() for ln in lines if "ERROR" in ln), lines[0] if lines else type(err).__name__)
 
 
+def measure_layer(config: dict, level: str, run_dir: Path, meshes: Path, U_mm_s: float) -> dict:
+    """The four metrics of a run's ``final.dump``, in the dataset's units (METRICS keys)."""
+    s = scene(config, level)
+    metrics = spread_layer_metrics(read_dump(run_dir / "final.dump"), s.sampling_region, U_mm_s * 1e-3, s.density,
+                                   substrate=meshes / "substrate.stl", n_lines=s.profilometer_lines,
+                                   seed=config["profilometer"]["seed"])
+    return {k: to_report_units(metrics)[k] for k in METRICS}
+
+
 def run_scene(task) -> list[dict]:
     """Geometry, settle (seed ``replicate``) and every point's spread of one variant."""
     name, config, level, replicate, points = task
-    s = scene(config, level)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -111,9 +119,6 @@ def run_scene(task) -> list[dict]:
                              "cpu_s": children_cpu() - cpu0, "error": short_error(err)})
                 continue
             cpu = children_cpu() - cpu0
-            metrics = spread_layer_metrics(read_dump(tmp / "run" / "final.dump"), s.sampling_region, U * 1e-3,
-                                           s.density, substrate=tmp / "meshes" / "substrate.stl",
-                                           n_lines=s.profilometer_lines, seed=config["profilometer"]["seed"])
             rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
                          "wall_s": health["wall_s"], "cpu_s": cpu, "steps": health["steps"],
                          "particles": health["atoms"], "timestep_s": health["timestep_s"],
@@ -121,7 +126,7 @@ def run_scene(task) -> list[dict]:
                          "max_overlap_fraction": health["max_overlap_fraction"],
                          "max_overlap_anywhere": health["max_overlap_anywhere"],
                          "peak_speed_m_s": health["peak_speed_m_s"],
-                         **{k: to_report_units(metrics)[k] for k in METRICS}})
+                         **measure_layer(config, level, tmp / "run", tmp / "meshes", U)})
             print(f"{name} seed {replicate} U={U:g} omega={omega:g}: {health['wall_s']:.1f} s, "
                   + ", ".join(f"{METRICS[k]} {rows[-1][k]:.4g}" for k in METRICS), flush=True)
     return rows

@@ -20,7 +20,7 @@ Both arms of a point run back to back in one task, so they share the
 machine's load. The settle of the all-skips arm is counted once, spread over
 the points. The layer's four metrics are compared point by point; the
 seed-to-seed spread (another heap packing) of the same level is the yardstick
-(``--noise``: a CSV of bench_fidelity.py with several seeds).
+(``--noise``: the level's noise-floor CSV, its pooled row).
 
 Writes ``benchmarks/measured/<name>.csv`` (one row per run) and ``<name>.md``.
 """
@@ -38,21 +38,11 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-from analysis.config import load_config, scene  # noqa: E402
-from analysis.dump import read_dump  # noqa: E402
-from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
+from analysis.config import load_config  # noqa: E402
 from analysis.simulate import SKIPS, make_geometry, settle, spread  # noqa: E402
-from benchmarks.bench_fidelity import METRICS, children_cpu  # noqa: E402
+from benchmarks.bench_fidelity import METRICS, children_cpu, measure_layer  # noqa: E402
 
 DEFAULT_POINTS = ",".join(f"{U}:{w}" for U in (40, 70, 100) for w in (-10, 0, 10))
-
-
-def measure(config, level, run_dir, meshes, U):
-    s = scene(config, level)
-    metrics = spread_layer_metrics(read_dump(run_dir / "final.dump"), s.sampling_region, U * 1e-3, s.density,
-                                   substrate=meshes / "substrate.stl", n_lines=s.profilometer_lines,
-                                   seed=config["profilometer"]["seed"])
-    return {k: to_report_units(metrics)[k] for k in METRICS}
 
 
 def run_point(task) -> list[dict]:
@@ -71,21 +61,19 @@ def run_point(task) -> list[dict]:
                          "spread_cpu_s": cpu, "steps": health["steps"], "final_atoms": health["atoms"],
                          "settle_wall_s": own["wall_s"] if arm == "no skips" else 0.0,
                          "settle_cpu_s": settle_cpu if arm == "no skips" else 0.0,
-                         **measure(config, level, tmp / arm.replace(" ", "_"), meshes, U)})
+                         **measure_layer(config, level, tmp / arm.replace(" ", "_"), meshes, U)})
         print(f"U={U:g} omega={omega:g}: " + ", ".join(
             f"{r['arm']} {r['spread_wall_s'] + r['settle_wall_s']:.1f} s" for r in rows[-2:]), flush=True)
     return rows
 
 
-def noise_floor(path: Path, level_scale: pd.Series) -> pd.Series | None:
-    """Mean seed-to-seed std of each metric (bench_fidelity CSV, its 'default' variant), relative."""
+def noise_floor(path: Path) -> pd.Series | None:
+    """Pooled seed-to-seed spread of each metric [fraction of its mean], from a
+    noise-floor CSV of the workflow (``analysis.noise_floor``)."""
     if not path.exists():
         return None
-    runs = pd.read_csv(path)
-    runs = runs[(runs["variant"] == "default") & runs["error"].isna()] if "error" in runs else \
-        runs[runs["variant"] == "default"]
-    std = runs.groupby(["U_mm_s", "omega_rad_s"])[list(METRICS)].std().mean()
-    return std / runs[list(METRICS)].abs().mean()
+    pooled = pd.read_csv(path).set_index("point").loc["pooled"]
+    return pd.Series({k: pooled[f"{k}_rel_pct"] / 100 for k in METRICS})
 
 
 def main(argv=None) -> int:
@@ -93,7 +81,8 @@ def main(argv=None) -> int:
     parser.add_argument("--level", default="default")
     parser.add_argument("--points", default=DEFAULT_POINTS, help="U:omega pairs, mm/s:rad/s")
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--noise", default=str(ROOT / "benchmarks/measured/fidelity_pass1.csv"))
+    parser.add_argument("--noise", default=str(ROOT / "benchmarks/measured/noise_default.csv"),
+                        help="noise-floor CSV of the level (results/<level>/surrogate/noise_floor.csv)")
     parser.add_argument("--name", default="skips")
     parser.add_argument("--summarise", action="store_true",
                         help="only re-write <name>.md from the runs in <name>.csv")
@@ -139,7 +128,7 @@ def summarise(runs: pd.DataFrame, args, elapsed: float | None) -> str:
     pivot = runs.pivot_table(index=["U_mm_s", "omega_rad_s"], columns="arm", values=list(METRICS))
     diff = pd.DataFrame({METRICS[k]: (pivot[(k, "all skips")] - pivot[(k, "no skips")]).abs()
                          / runs[k].abs().mean() for k in METRICS})
-    floor = noise_floor(Path(args.noise), None)
+    floor = noise_floor(Path(args.noise))
     lines = [f"# Skips at the `{args.level}` level",
              "",
              f"Machine: {platform.node()} ({platform.machine()}, 2 cores), date: {time.strftime('%Y-%m-%d')}, "
@@ -160,7 +149,7 @@ def summarise(runs: pd.DataFrame, args, elapsed: float | None) -> str:
              "",
              "Mean: " + ", ".join(f"{m} {v:.1%}" for m, v in diff.mean().items())]
     if floor is not None:
-        lines += ["", "Seed-to-seed spread of the same level (noise floor, from "
+        lines += ["", "Seed-to-seed spread of the same level (pooled noise floor, from "
                   f"`{Path(args.noise).name}`): " + ", ".join(f"{METRICS[k]} {v:.1%}" for k, v in floor.items())]
     return "\n".join(lines) + "\n"
 
