@@ -35,13 +35,13 @@ import warnings
 
 import numpy as np
 import pandas as pd
+from joblib import Parallel, delayed
 from scipy.linalg import cho_solve, solve_triangular
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.ensemble import ExtraTreesRegressor
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
-from sklearn.model_selection import cross_val_predict
 from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
@@ -265,14 +265,15 @@ def make_candidate(name, params):
     raise ValueError(f"unknown surrogate model {name!r}; choose from {', '.join(CANDIDATES)}")
 
 
-def _oof(model, X, Y, splits):
-    """Out-of-fold predictions and the ConvergenceWarning count."""
+def _fold(name, p, X, Y, train, test):
+    """Fit a fresh ``name`` candidate on one fold: (test rows, their predictions, ConvergenceWarnings, fit s)."""
+    t0 = time.perf_counter()
     with _convergence_messages() as messages:
-        pred = cross_val_predict(model, X, Y, cv=splits)
-    return pred, len(messages)
+        model = make_candidate(name, p).fit(X[train], Y[train])
+    return test, model.predict(X[test]), len(messages), time.perf_counter() - t0
 
 
-def cross_validate_models(df, params, log=None):
+def cross_validate_models(df, params, log=None, n_jobs=1):
     """Score every candidate of ``params["models"]`` by grouped cross-validation.
 
     Schemes: ``kfold``: ``cv_folds``-fold over the (U, omega) points, repeated
@@ -291,6 +292,8 @@ def cross_validate_models(df, params, log=None):
         ``cv_loo``, ``split_seed`` and the models' own keys).
     log : callable, optional
         Called with a progress line per model and scheme.
+    n_jobs : int
+        Folds fitted at once (joblib processes); the scores do not depend on it.
 
     Returns
     -------
@@ -298,7 +301,7 @@ def cross_validate_models(df, params, log=None):
         One row per (model, scheme, metric): ``model``, ``scheme``,
         ``metric``, ``symbol``, ``R``, ``R2``, ``MAPE_pct``, ``R_sd``,
         ``R2_sd``, ``MAPE_pct_sd``, ``n_splits`` (folds x repeats, or points),
-        ``fit_s`` (CPU-bound wall time of the scheme), ``convergence_warnings``.
+        ``fit_s`` (the scheme's fits, summed over its folds), ``convergence_warnings``.
     """
     p = {**DEFAULT_CHOICE, **params}
     _check_dataset(df)
@@ -308,16 +311,21 @@ def cross_validate_models(df, params, log=None):
                           for r in range(int(p["cv_repeats"]))])]
     if p["cv_loo"]:
         schemes.append(("loo", [point_folds(df, n_points, 0)]))
+    tasks = [(name, scheme, r, train, test) for name in p["models"] for scheme, repeats in schemes
+             for r, splits in enumerate(repeats) for train, test in splits]
+    folds = Parallel(n_jobs=n_jobs)(delayed(_fold)(name, p, X, Y, train, test)
+                                    for name, _, _, train, test in tasks)
     rows = []
     for name in p["models"]:
         for scheme, repeats in schemes:
-            t0 = time.perf_counter()
-            scores, warned = [], 0
-            for splits in repeats:
-                pred, n_warn = _oof(make_candidate(name, p), X, Y, splits)
-                scores.append(regression_scores(Y, pred))
-                warned += n_warn
-            elapsed = time.perf_counter() - t0
+            preds = {r: np.full_like(Y, np.nan) for r in range(len(repeats))}
+            warned, elapsed = 0, 0.0
+            for (n, sc, r, _, _), (test, fold_pred, n_warn, fit_s) in zip(tasks, folds):
+                if (n, sc) == (name, scheme):
+                    preds[r][test] = fold_pred
+                    warned += n_warn
+                    elapsed += fit_s
+            scores = [regression_scores(Y, pred) for pred in preds.values()]
             for m, (symbol, _) in METRICS.items():
                 values = {k: np.array([np.nan if s[m][k] is None else s[m][k] for s in scores])
                           for k in ("R", "R2", "MAPE_pct")}

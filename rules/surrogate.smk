@@ -25,6 +25,7 @@ rule model_choice:
     params:
         surrogate=CONFIG["surrogate"],
         level=LEVEL,
+    threads: 4  # folds fitted at once; Snakemake caps it at --cores
     log:
         f"{LOGS}/model_choice.log",
     benchmark:

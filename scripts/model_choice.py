@@ -13,7 +13,8 @@ from analysis.workflow import rule_context  # noqa: E402
 with rule_context(snakemake):
     params = snakemake.params.surrogate
     df = pd.read_csv(snakemake.input.dataset)
-    table = cross_validate_models(df, params, log=lambda line: print(line, flush=True))
+    table = cross_validate_models(df, params, log=lambda line: print(line, flush=True),
+                                  n_jobs=snakemake.threads)
     chosen, ranking = choose_model(table, params["models"])
     ceiling = accuracy_ceiling(df)
     write_model_choice(table, chosen, snakemake.output.csv, snakemake.output.md, ceiling,

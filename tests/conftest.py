@@ -98,7 +98,7 @@ def fake_snakemake(tmp_path):
     def make(input, output, params=None):
         return SimpleNamespace(input=Named(input), output=Named(output),
                                params=SimpleNamespace(**(params or {})),
-                               log=[str(tmp_path / "rule.log")], rule="test",
+                               log=[str(tmp_path / "rule.log")], rule="test", threads=1,
                                config=yaml.safe_load((root / "config.yaml").read_text()),
                                scriptdir=root / "scripts")
     return make

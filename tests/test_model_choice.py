@@ -210,6 +210,14 @@ def test_choice_is_the_best_mean_kfold_r2_and_is_written(cv_small, tmp_path):
     assert f"Chosen: **{chosen}**" in (tmp_path / "c.md").read_text()
 
 
+def test_folds_fitted_in_parallel_score_the_same(cv_small):
+    df, params, table = cv_small
+    quick = {**params, "models": ["gp", "trees"], "cv_repeats": 1}
+    serial = cross_validate_models(df, quick).drop(columns="fit_s")
+    parallel = cross_validate_models(df, quick, n_jobs=2).drop(columns="fit_s")
+    pd.testing.assert_frame_equal(serial, parallel)
+
+
 def test_ties_go_to_the_first_listed_model():
     rows = [{"model": m, "scheme": "kfold", "metric": x, "R2": 0.9} for m in ("gp", "trees")
             for x in METRICS]
