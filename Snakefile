@@ -25,7 +25,7 @@ include: "rules/maps.smk"
 
 
 # On a cluster (profiles/slurm) only settle and spread are submitted; the rest is light.
-localrules: all, geometry, layer_metrics, dataset, trends, noise_floor, model_choice, surrogate, maps, vtk, top_view
+localrules: all, geometry, layer_metrics, dataset, trends, noise_floor, model_choice, surrogate, maps, top_view
 
 
 rule all:

@@ -14,18 +14,6 @@ rule maps:
         "../scripts/render_maps.py"
 
 
-rule vtk:
-    """Each run's final state as VTK polydata, for ParaView."""
-    input:
-        rules.spread.output.dump,
-    output:
-        f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/final.vtp",
-    log:
-        f"{LOGS}/vtk/U{{U}}_w{{omega}}_r{{rep}}.log",
-    script:
-        "../scripts/write_vtk.py"
-
-
 rule top_view:
     """Top view of the sampling region, particles coloured by size (Figure 4)."""
     input:

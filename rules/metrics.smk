@@ -1,10 +1,11 @@
 rule layer_metrics:
-    """The paper's eqs. 1-7 from the final dump, by the virtual profilometer."""
+    """The paper's eqs. 1-7 from the final dump, by the virtual profilometer; the layer as VTK for ParaView."""
     input:
         dump=rules.spread.output.dump,
         substrate=rules.geometry.output.substrate,
     output:
-        f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/metrics.json",
+        metrics=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/metrics.json",
+        vtk=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/final.vtp",  # here, not in a rule of its own: one Python start per run
     params:
         level=LEVEL,
         profilometer=PROFILOMETER,
