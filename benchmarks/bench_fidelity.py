@@ -61,6 +61,13 @@ VARIANTS = {
     "lines200": {"LEVEL.profilometer_lines": 200},
     "ranks2": {"LEVEL.mpi_ranks": 2},
     "E1e6+dt0.3": {"material.youngs_modulus_dem_Pa": 1.0e6, "timestep.rayleigh_fraction": 0.3},
+    # pass 2: cheaper steps and fewer roller facets, and the scene's size
+    "dt0.4": {"timestep.rayleigh_fraction": 0.4},
+    "facets90": {"roller.facets_around": 90},
+    "dt0.4+facets90": {"timestep.rayleigh_fraction": 0.4, "roller.facets_around": 90},
+    "strip1.8": {"LEVEL.strip_width_mm": 1.8, "LEVEL.heap_particles": 1350},
+    "heap1.5x": {"LEVEL.heap_particles": 1350},
+    "lines2000": {"LEVEL.profilometer_lines": 2000},
 }
 
 
@@ -96,6 +103,12 @@ def measure_layer(config: dict, level: str, run_dir: Path, meshes: Path, U_mm_s:
     return {k: to_report_units(metrics)[k] for k in METRICS}
 
 
+def sampling_area_mm2(config: dict, level: str) -> float:
+    """Area of the level's sampling region [mm^2]: M_s is the mass over it."""
+    x0, x1, y0, y1 = scene(config, level).sampling_region
+    return (x1 - x0) * (y1 - y0) * 1e6
+
+
 def run_scene(task) -> list[dict]:
     """Geometry, settle (seed ``replicate``) and every point's spread of one variant."""
     name, config, level, replicate, points = task
@@ -126,6 +139,7 @@ def run_scene(task) -> list[dict]:
                          "max_overlap_fraction": health["max_overlap_fraction"],
                          "max_overlap_anywhere": health["max_overlap_anywhere"],
                          "peak_speed_m_s": health["peak_speed_m_s"],
+                         "sampling_area_mm2": sampling_area_mm2(config, level),
                          **measure_layer(config, level, tmp / "run", tmp / "meshes", U)})
             print(f"{name} seed {replicate} U={U:g} omega={omega:g}: {health['wall_s']:.1f} s, "
                   + ", ".join(f"{METRICS[k]} {rows[-1][k]:.4g}" for k in METRICS), flush=True)
@@ -137,6 +151,9 @@ def summarise(runs: pd.DataFrame, reference: str) -> pd.DataFrame:
     failed = runs["error"].notna() if "error" in runs else pd.Series(False, index=runs.index)
     fails = failed.groupby(runs["variant"], sort=False).sum()
     runs = runs[~failed]
+    if "sampling_area_mm2" in runs:  # M_s per unit area: a wider strip has a wider region
+        ref_area = runs.loc[runs["variant"] == reference, "sampling_area_mm2"].iloc[0]
+        runs = runs.assign(mass_g=runs["mass_g"] * ref_area / runs["sampling_area_mm2"])
     means = runs.groupby(["variant", "U_mm_s", "omega_rad_s"])[list(METRICS)].mean()
     ref = means.loc[reference]
     scale = ref.abs().mean()
@@ -190,6 +207,8 @@ def main(argv=None) -> int:
     parser.add_argument("--reference", default="reference")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--name", default="fidelity")
+    parser.add_argument("--summarise", action="store_true",
+                        help="no runs: rewrite <name>.md and .png from <name>.csv (same --variants, --reference)")
     args = parser.parse_args(argv)
     base = load_config(ROOT / "config.yaml")
     points = [tuple(float(v) for v in p.split(":")) for p in args.points.split(",")]
@@ -201,10 +220,17 @@ def main(argv=None) -> int:
     tasks = [(n, variant_config(base, args.level, VARIANTS[n]), args.level, seed, points)
              for n in names for seed in range(args.seeds)]
     started = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs) as pool:
-        runs = pd.DataFrame([row for rows in pool.map(run_scene, tasks) for row in rows])
     out = ROOT / "benchmarks" / "measured"
-    runs.to_csv(out / f"{args.name}.csv", index=False)
+    if args.summarise:
+        runs = pd.read_csv(out / f"{args.name}.csv")
+        if "sampling_area_mm2" not in runs:  # recorded before the column existed: from the variants' configs
+            runs["sampling_area_mm2"] = runs["variant"].map(
+                {n: sampling_area_mm2(config, level) for n, config, level, *_ in tasks})
+            runs.to_csv(out / f"{args.name}.csv", index=False)
+    else:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            runs = pd.DataFrame([row for rows in pool.map(run_scene, tasks) for row in rows])
+        runs.to_csv(out / f"{args.name}.csv", index=False)
     table = summarise(runs, args.reference)
     plot(table, out / f"{args.name}.png")
     overrides = "\n".join(f"- `{n}`: {VARIANTS[n] or 'the level as configured'}" for n in names)
@@ -214,13 +240,15 @@ def main(argv=None) -> int:
         shown[col] = shown[col].map(lambda v, f=f: "" if pd.isna(v) else f(v))
     for col in ("cpu_s_per_run", "wall_s_per_run", "steps_per_run"):
         shown[col] = shown[col].map(lambda v: "" if pd.isna(v) else f"{v:.0f}")
-    text = (f"# Run time against error ({args.level} level)\n\n"
+    command = f"`.venv/bin/python benchmarks/bench_fidelity.py {' '.join(argv if argv is not None else sys.argv[1:])}`"
+    when = (f"Runs from `{args.name}.csv` (measured by the same command without `--summarise`), summarised "
+            f"{time.strftime('%Y-%m-%d')} by\n{command}.\n\n" if args.summarise else
             f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, "
-            f"{args.jobs} scenes at once, in {time.perf_counter() - started:.0f} s, by\n"
-            f"`.venv/bin/python benchmarks/bench_fidelity.py {' '.join(argv if argv is not None else sys.argv[1:])}`.\n\n"
+            f"{args.jobs} scenes at once, in {time.perf_counter() - started:.0f} s, by\n{command}.\n\n")
+    text = (f"# Run time against error ({args.level} level)\n\n" + when +
             f"Points (U mm/s, omega rad/s): {points}; {args.seeds} seeds (heap packings) per variant.\n"
             f"Error: mean over the points of |variant - reference| / mean |reference|, each the mean "
-            f"over its seeds.\n\nVariants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")
+            f"over its seeds; M_s per unit sampling area (a wider strip has a wider region).\n\nVariants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")
     (out / f"{args.name}.md").write_text(text)
     print(text)
     return 0

@@ -73,7 +73,7 @@ def test_dataset_refuses_an_unsound_run_naming_it(change, message):
 
 def test_time_step_above_the_guard_is_refused_before_liggghts_runs(config, tmp_path):
     too_big = copy.deepcopy(config)
-    too_big["timestep"]["rayleigh_fraction"] = 0.5
+    too_big["timestep"]["rayleigh_fraction"] = too_big["timestep"]["max_rayleigh_fraction"] + 0.1
     with pytest.raises(LiggghtsError, match="exceeds the allowed fraction of the Rayleigh time"):
         settle(too_big, "smoke", tmp_path / "meshes", tmp_path / "settle")
     assert not (tmp_path / "settle" / "settle.log").exists()
