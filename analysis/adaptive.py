@@ -58,7 +58,8 @@ from scipy.stats import qmc
 
 from analysis.config import ConfigError, load_config, run_name
 from analysis.model_choice import GPSurrogate
-from analysis.surrogate import INPUTS, METRICS, atomic_path, inputs_of, save_surrogate, targets_of
+from analysis.surrogate import INPUTS, METRICS, inputs_of, save_surrogate, targets_of
+from analysis.workflow import atomic_path
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -25,9 +25,10 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from analysis.surrogate import (INPUTS, METRICS, atomic_path, hybrid_index_std, hybrid_indices,
-                                inputs_of, metric_maxima, pearson_r, point_means, predict_frame,
-                                predict_grid, provides_std)
+from analysis.surrogate import (INPUTS, METRICS, hybrid_index_std, hybrid_indices, inputs_of,
+                                metric_maxima, pearson_r, point_means, predict_frame, predict_grid,
+                                provides_std)
+from analysis.workflow import atomic_path
 
 #: Axis labels with units (matplotlib mathtext).
 LABELS = {

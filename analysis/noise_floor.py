@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from analysis.surrogate import INPUTS, METRICS, atomic_path, point_groups, point_means
+from analysis.surrogate import INPUTS, METRICS, point_groups, point_means
+from analysis.workflow import atomic_path
 
 #: Row label of the pooled summary in the noise-floor table.
 POOLED = "pooled"

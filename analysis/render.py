@@ -22,7 +22,7 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 import pyvista  # noqa: E402  (after the render-window choice)
 from vtkmodules.vtkCommonDataModel import vtkPlane  # noqa: E402
 
-from analysis.surrogate import atomic_path  # noqa: E402
+from analysis.workflow import atomic_path  # noqa: E402
 
 pyvista.OFF_SCREEN = True
 

@@ -34,7 +34,6 @@ Inputs: ``U_mm_s`` (spreader translation speed, mm/s), ``omega_rad_s``
 
 from __future__ import annotations
 
-import os
 import time
 import warnings
 from contextlib import contextmanager
@@ -53,6 +52,8 @@ from sklearn.neural_network import MLPRegressor
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
+
+from analysis.workflow import atomic_path
 
 #: Input columns and their units.
 INPUTS = {"U_mm_s": "mm/s", "omega_rad_s": "rad/s"}
@@ -91,23 +92,6 @@ _MODEL_KEYS = ("hidden_units", "activation", "alpha", "solver",
 _FORMAT = "spreadmap-surrogate/1"
 _MAPE_NOTE = ("MAPE_pct = mean(|simulated - predicted| / |simulated|) x 100 over the runs "
               "whose simulated value is nonzero (n_nonzero of them); null when none is.")
-
-
-@contextmanager
-def atomic_path(path):
-    """Yield a temporary path next to ``path``; move it onto ``path`` on success.
-
-    The temporary name keeps the suffix (writers that pick a format from the
-    extension still work) and is removed if the block raises.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 class RestartedMLP(RegressorMixin, BaseEstimator):

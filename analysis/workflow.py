@@ -30,6 +30,23 @@ def rule_context(smk):
             sys.exit(1)
 
 
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path next to ``path``; move it onto ``path`` on success.
+
+    The temporary name keeps the suffix (writers that pick a format from the
+    extension still work) and is removed if the block raises.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def write_json(obj, path) -> None:
     """Write JSON atomically: a temp file in the same folder, then rename."""
     path = Path(path)

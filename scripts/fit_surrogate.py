@@ -7,9 +7,9 @@ sys.path.insert(0, str(Path(snakemake.scriptdir).parent))
 import pandas as pd  # noqa: E402
 
 from analysis.model_choice import chosen_summary, fit_chosen, read_choice  # noqa: E402
-from analysis.surrogate import (atomic_path, fit_surrogate, format_scores, predict_grid,  # noqa: E402
+from analysis.surrogate import (fit_surrogate, format_scores, predict_grid,  # noqa: E402
                                 save_surrogate, split_table)
-from analysis.workflow import rule_context, write_json  # noqa: E402
+from analysis.workflow import atomic_path, rule_context, write_json  # noqa: E402
 
 with rule_context(snakemake):
     out, params = snakemake.output, snakemake.params.surrogate
