@@ -46,7 +46,10 @@ def roller_state(path):
 
 def test_heap_settles_whole(smoke):
     h, s = smoke["settled"], smoke["scene"]
-    assert h["inserted"] == h["atoms"] == s.heap_particles
+    assert h["inserted"] == s.heap_particles
+    # strays that rolled towards the sampling region are removed (at most 1 %), nothing else is
+    assert h["atoms"] == h["inserted"] - h["strays_removed"]
+    assert h["strays_removed"] <= 0.01 * s.heap_particles
     assert h["lost"] == 0 and h["through_substrate"] == 0
     assert h["max_overlap_fraction"] < 0.02
 
@@ -110,12 +113,16 @@ def test_settled_bed_solid_fraction_is_that_of_poured_spheres(smoke):
     assert 0.55 <= inside.mean() <= 0.64
 
 
-def test_restitution_and_free_fall_time(config, tmp_path):
+@pytest.mark.parametrize("d_um", [100, 175, 250])   # the PSD's smallest, mean and largest
+def test_restitution_and_free_fall_time(config, tmp_path, d_um):
     s = scene(config, "smoke")
-    d, height = 175e-6, 1e-3
+    d, height = d_um * 1e-6, 1e-3
     trace = drop_sphere(s, tmp_path, d, height, 0.02)
     bounce = first_bounce(trace["t"], trace["z"], trace["vz"], d / 2)
-    assert bounce["restitution"] == pytest.approx(config["material"]["restitution"], rel=0.03)
+    # The configured 0.4 T_R resolves a contact in few steps and loses up to 6 % of the
+    # restitution (the smallest sphere; benchmarks/measured/restitution_dt.md). A wrong
+    # material or unit mapping is off by far more.
+    assert bounce["restitution"] == pytest.approx(config["material"]["restitution"], rel=0.07)
     assert bounce["impact_time"] == pytest.approx(free_fall_time(height), rel=0.01)
     assert bounce["v_in"] == pytest.approx((2 * 9.81 * height) ** 0.5, rel=0.01)
 
