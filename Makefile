@@ -37,7 +37,7 @@ system-packages:
 
 $(VENV)/.installed: requirements.txt
 	python3 -m venv $(VENV)
-	$(VENV)/bin/pip install --quiet --no-compile --disable-pip-version-check -r requirements.txt  # no bytecode up front: 30 s of the 60
+	$(VENV)/bin/pip install --quiet --disable-pip-version-check -r requirements.txt  # with bytecode: PYTHONDONTWRITEBYTECODE may be set, and every job would compile its imports
 	touch $@
 
 clean:

@@ -65,6 +65,8 @@ VARIANTS = {
     "dt0.4": {"timestep.rayleigh_fraction": 0.4},
     "facets90": {"roller.facets_around": 90},
     "dt0.4+facets90": {"timestep.rayleigh_fraction": 0.4, "roller.facets_around": 90},
+    "dt0.3+facets180": {"timestep.rayleigh_fraction": 0.3, "roller.facets_around": 180},  # default before pass 2
+    "facets60": {"roller.facets_around": 60},
     "strip1.8": {"LEVEL.strip_width_mm": 1.8, "LEVEL.heap_particles": 1350},
     "heap1.5x": {"LEVEL.heap_particles": 1350},
     "lines2000": {"LEVEL.profilometer_lines": 2000},
