@@ -94,7 +94,7 @@ def binsize(s: Scene) -> float:
 
     Each rebuild tests every particle in the bins a mesh facet's box touches,
     and the rotating roller forces a rebuild every ~10-20 steps: these bins
-    are 8 % faster than bins of 4 largest diameters, and LIGGGHTS' own (half
+    are 9 % faster than bins of 4 largest diameters, and LIGGGHTS' own (half
     the cutoff) 28 % slower than those (benchmarks/measured/spread_profile.md)."""
     return max(s.diameters) + skin(s)
 
