@@ -54,6 +54,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import yaml
+from scipy.linalg import solve_triangular
 from scipy.stats import qmc
 
 from analysis.config import ConfigError, load_config, run_name
@@ -146,8 +147,39 @@ def _scaled_nearest(gp, X_query, X_points):
     return np.argmin(d2, axis=1)
 
 
-def choose_batch(gp, X, candidates, batch_size, error_weight=0.5, exclude=None):
-    """Choose ``batch_size`` new points by expected prediction error (module docstring).
+def _reference(bounds_scaled, n=21):
+    """An n x n grid over the standardised design box: where the integrated variance is summed."""
+    (a0, a1), (b0, b1) = bounds_scaled
+    A, B = np.meshgrid(np.linspace(a0, a1, n), np.linspace(b0, b1, n), indexing="ij")
+    return np.c_[A.ravel(), B.ravel()]
+
+
+def _variance_reduction(gp, Xs_cand, Xs_train, Xs_ref, weight_ref):
+    """Drop of the (weighted) mean posterior variance over ``Xs_ref`` if each candidate were run.
+
+    For one metric with signal kernel k, noise variance s_n^2 and posterior
+    covariance c(x, x') given the runs ``Xs_train``, running candidate x_c
+    lowers the variance at x by ``c(x, x_c)^2 / (c(x_c, x_c) + s_n^2)``; this
+    is averaged over the reference points (weights ``weight_ref``) and summed
+    over the metrics (standardised units), shape (m,).  Hyperparameters are
+    kept and the result does not depend on targets (kriging believer).
+    """
+    out = np.zeros(len(Xs_cand))
+    w = weight_ref / weight_ref.sum()
+    for gp_j in gp.gps_:
+        signal, noise = gp_j.kernel_.k1, gp_j.kernel_.k2.noise_level
+        L = np.linalg.cholesky(gp_j.kernel_(Xs_train) + 1e-10 * np.eye(len(Xs_train)))
+        Vc = solve_triangular(L, signal(Xs_train, Xs_cand), lower=True)       # (n, m)
+        Vr = solve_triangular(L, signal(Xs_train, Xs_ref), lower=True)        # (n, r)
+        cov = signal(Xs_ref, Xs_cand) - Vr.T @ Vc                              # (r, m)
+        var_c = np.clip(signal.diag(Xs_cand) - np.sum(Vc * Vc, axis=0), 0.0, None)
+        out += (w @ (cov * cov)) / (var_c + noise)
+    return out
+
+
+def choose_batch(gp, X, candidates, batch_size, error_weight=0.5, exclude=None,
+                 acquisition="mepe", bounds=None):
+    """Choose ``batch_size`` new points by expected prediction error or integrated variance.
 
     Parameters
     ----------
@@ -163,6 +195,17 @@ def choose_batch(gp, X, candidates, batch_size, error_weight=0.5, exclude=None):
     exclude : numpy.ndarray, shape (k, 2), optional
         Points never to choose (e.g. a held-out test set); existing points
         are never chosen again.
+    acquisition : {"mepe", "imse"}
+        ``"mepe"``: a(x) = w e^2(nearest run) + (1 - w) s^2(x), the point
+        where the map is least sure (module docstring).  ``"imse"``: the
+        point whose run would most lower the posterior variance averaged
+        over the whole design box (integrated mean squared error, Cohn's
+        active learning), each place of the box weighted by
+        ``(1 - w) + w e^2(nearest run) / mean(e^2)``.  Maximum variance
+        tends to pick the box's edges and corners; IMSE picks points that
+        serve the most of the map, which is what the map error measures.
+    bounds : ((float, float), (float, float)), optional
+        The design box for ``"imse"`` (default: the candidates' extent).
 
     Returns
     -------
@@ -170,6 +213,8 @@ def choose_batch(gp, X, candidates, batch_size, error_weight=0.5, exclude=None):
     acquisition : numpy.ndarray, shape (b,)
         a(x) of each chosen point when it was chosen (standardised units).
     """
+    if acquisition not in ("mepe", "imse"):
+        raise ValueError(f"unknown acquisition {acquisition!r}; choose mepe or imse")
     X = np.asarray(X, float)
     points, inverse = np.unique(X, axis=0, return_inverse=True)
     # leave-one-out squared error per run, standardised and summed over metrics;
@@ -183,12 +228,23 @@ def choose_batch(gp, X, candidates, batch_size, error_weight=0.5, exclude=None):
         raise ValueError(f"only {len(cand)} candidate points left for a batch of {batch_size}")
     Xs_train = gp.x_scaler_.transform(X)
     Xs_cand = gp.x_scaler_.transform(cand)
+    if acquisition == "imse":
+        if bounds is None:
+            bounds = tuple((float(lo), float(hi)) for lo, hi in zip(candidates.min(0),
+                                                                   candidates.max(0)))
+        corners = gp.x_scaler_.transform(np.array(bounds, float).T)
+        ref = _reference(tuple(zip(corners[0], corners[1])))
+        ref_e2 = e2[_scaled_nearest(gp, gp.x_scaler_.inverse_transform(ref), points)]
+        weight_ref = (1.0 - error_weight) + error_weight * ref_e2 / max(e2.mean(), 1e-12)
     chosen, values = [], []
     for _ in range(int(batch_size)):          # batch slots, each a vectorised sweep of candidates
-        var = gp._latent_var(Xs_cand, Xs_train).sum(axis=1)
-        design = np.r_[points, cand[chosen]] if chosen else points
-        err = np.r_[e2, np.zeros(len(chosen))][_scaled_nearest(gp, cand, design)]
-        acq = error_weight * err + (1.0 - error_weight) * var
+        if acquisition == "imse":
+            acq = _variance_reduction(gp, Xs_cand, Xs_train, ref, weight_ref)
+        else:
+            var = gp._latent_var(Xs_cand, Xs_train).sum(axis=1)
+            design = np.r_[points, cand[chosen]] if chosen else points
+            err = np.r_[e2, np.zeros(len(chosen))][_scaled_nearest(gp, cand, design)]
+            acq = error_weight * err + (1.0 - error_weight) * var
         acq[chosen] = -np.inf
         best = int(np.argmax(acq))
         chosen.append(best)
@@ -235,6 +291,8 @@ class AdaptiveResult:
 
 def check_settings(settings, replicates=1):
     """Raise ValueError naming the bad ``adaptive:`` value."""
+    if settings.get("acquisition", "mepe") not in ("mepe", "imse"):
+        raise ValueError(f"adaptive.acquisition = {settings['acquisition']!r}: choose mepe or imse")
     budget_points = int(settings["max_runs"]) // int(replicates)
     if int(settings["initial_points"]) > budget_points:
         raise ValueError(f"adaptive.initial_points = {settings['initial_points']} x "
@@ -318,7 +376,8 @@ def run_adaptive(evaluate, bounds, settings, *, replicates=1, exclude=None, gp_p
         k += 1
         batch, acq = choose_batch(gp, inputs_of(data), candidates,
                                   min(int(settings["batch_size"]), room),
-                                  float(settings["error_weight"]), exclude)
+                                  float(settings["error_weight"]), exclude,
+                                  settings.get("acquisition", "mepe"), bounds)
         design = pd.concat([design, pd.DataFrame({"U_mm_s": batch[:, 0], "omega_rad_s": batch[:, 1],
                                                   "round": k, "acquisition": acq})],
                            ignore_index=True)
@@ -437,7 +496,8 @@ def main(argv=None):
     parser.add_argument("--cores", type=int, default=2, help="snakemake --cores (default 2)")
     parser.add_argument("--workdir", type=Path, default=ROOT, help="Snakemake working directory")
     for key, kind in (("initial_points", int), ("batch_size", int), ("max_runs", int),
-                      ("target_loo_r2", float), ("error_weight", float), ("seed", int)):
+                      ("target_loo_r2", float), ("acquisition", str), ("error_weight", float),
+                      ("seed", int)):
         parser.add_argument("--" + key.replace("_", "-"), dest=key, type=kind,
                             help=f"overrides adaptive.{key}")
     args = parser.parse_args(argv)

@@ -149,6 +149,38 @@ def test_choose_batch_spreads_a_batch_out():
     assert gaps[np.triu_indices(4, 1)].min() > 0.1
 
 
+def test_imse_is_the_brute_force_drop_of_the_mean_variance():
+    """The closed-form integrated variance reduction equals refitting the variance with the run added."""
+    from analysis.adaptive import _reference, _variance_reduction
+    from analysis.model_choice import GPSurrogate
+    X = initial_design(8, BOUNDS, RES, seed=2)
+    Y = np.column_stack([corner_feature(*X.T), broad_feature(*X.T), X[:, 0], X[:, 1] ** 2])
+    gp = GPSurrogate().fit(X, Y)
+    Xs = gp.x_scaler_.transform(X)
+    cand = gp.x_scaler_.transform(np.array([[41.0, 0.0], [70.0, 0.0], [99.0, 19.0]]))
+    ref = _reference(((-1.5, 1.5), (-1.5, 1.5)), n=9)
+    fast = _variance_reduction(gp, cand, Xs, ref, np.ones(len(ref)))
+    before = gp._latent_var(ref, Xs).sum(axis=1).mean()
+    slow = [before - gp._latent_var(ref, np.r_[Xs, c[None]]).sum(axis=1).mean() for c in cand]
+    np.testing.assert_allclose(fast, slow, rtol=1e-6)
+    assert fast.min() > 0
+
+
+def test_imse_serves_the_box_where_maximum_variance_goes_to_its_edge():
+    """Runs crowded at low U: maximum variance picks the far edge U = 100, IMSE steps inside it."""
+    from analysis.model_choice import GPSurrogate
+    X = np.array([(u, w) for u in (40.0, 50.0, 60.0) for w in (-20.0, 0.0, 20.0)])
+    Y = np.column_stack([broad_feature(*X.T)] * 4) + 0.01 * np.arange(len(X))[:, None]
+    gp = GPSurrogate(length_scale_bounds=(1.0, 1.0 + 1e-9)).fit(X, Y)
+    cands = lattice(BOUNDS, (2.0, 1.0))
+    mepe, _ = choose_batch(gp, X, cands, 1, 0.0)
+    imse, _ = choose_batch(gp, X, cands, 1, 0.0, acquisition="imse", bounds=BOUNDS)
+    assert mepe[0, 0] == 100.0
+    assert 60.0 < imse[0, 0] < 100.0
+    with pytest.raises(ValueError, match="'ei'"):
+        choose_batch(gp, X, cands, 1, 0.0, acquisition="ei")
+
+
 def test_too_small_a_budget_is_refused(capsys):
     with pytest.raises(ValueError, match="max_runs = 8"):
         run_adaptive(Synthetic(), BOUNDS, {**SETTINGS, "max_runs": 8}, log=lambda line: None)
