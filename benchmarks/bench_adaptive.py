@@ -14,7 +14,7 @@ metric ``nRMSE = RMSE(held-out) / std(held-out values)`` (0: perfect, 1: no
 better than the held-out mean; R^2 = 1 - nRMSE^2) is recorded.
 
 Designs: nested sub-grids of the sweep grid (the paper's 5 x 9 = 45 and
-coarser ones: 3 x 3, 3 x 5, 5 x 5), the first n points of a scrambled Sobol
+coarser ones: 3 x 3, 3 x 5, 5 x 5, 3 x 9), the first n points of a scrambled Sobol
 sequence (``--sobol-sizes``; its seed is ``adaptive.seed``, so the adaptive
 design starts from the same runs), and the adaptive design (``adaptive:`` in
 config.yaml; ``--initial``, ``--batch``, ``--max-runs`` override), scored
@@ -56,7 +56,11 @@ def cpu_model() -> str:
 
 
 def subgrids(U, omega):
-    """Nested sub-grids of the U x omega grid: (label, list of (U, omega)), coarse to full."""
+    """Nested sub-grids of the U x omega grid: (label, list of (U, omega)), coarse to full.
+
+    3 x 3, 3 x 5, 5 x 5, 3 x 9 and 5 x 9 for the paper's grid (3 x 9 keeps every omega:
+    the metrics vary on ~5 rad/s in omega, on 20-60 mm/s in U).
+    """
     U, omega = sorted(U), sorted(omega)
 
     def coarse(v):
@@ -66,7 +70,7 @@ def subgrids(U, omega):
         return v[::2] if len(v) > 3 else v
     out = {}
     for us, ws in ((coarse(U), coarse(omega)), (coarse(U), half(omega)), (U, half(omega)),
-                   (U, omega)):
+                   (coarse(U), omega), (U, omega)):
         out.setdefault(len(us) * len(ws), (f"grid {len(us)}x{len(ws)}",
                                            [(u, w) for u in us for w in ws]))
     return [out[k] for k in sorted(out)]
@@ -82,6 +86,10 @@ def off_design(n, bounds, resolution, seed, taken):
     return np.array(keep[:n])
 
 
+ACQ = {"mepe": "expected prediction error at the point (mepe)",
+       "imse": "integrated variance reduction over the box (imse)"}
+
+
 def errors(model, held):
     """Per metric nRMSE and R^2 of ``model`` on the held-out runs ``held``."""
     Y, P = targets_of(held), model.predict(inputs_of(held))
@@ -92,6 +100,13 @@ def errors(model, held):
     return {**{f"nrmse_{m}": float(v) for m, v in zip(METRICS, nrmse)},
             **{f"r2_{m}": float(v) for m, v in zip(METRICS, r2)},
             "nrmse_mean": float(nrmse.mean())}
+
+
+def noise_floor_nrmse(path, held):
+    """Per metric nRMSE of a perfect map of the mean on single held-out runs: pooled sd / std(held)."""
+    pooled = pd.read_csv(path).set_index("point").loc["pooled"]
+    scale = targets_of(held).std(axis=0)
+    return {m: float(pooled[f"{m}_sd"] / s) for m, s in zip(METRICS, scale)}
 
 
 def fit(name, params, data):
@@ -111,9 +126,14 @@ def main(argv=None):
     parser.add_argument("--initial", type=int, help="overrides adaptive.initial_points")
     parser.add_argument("--batch", type=int, help="overrides adaptive.batch_size")
     parser.add_argument("--max-runs", type=int, help="overrides adaptive.max_runs")
+    parser.add_argument("--acquisition", choices=["mepe", "imse"], help="overrides adaptive.acquisition")
+    parser.add_argument("--error-weight", type=float, help="overrides adaptive.error_weight")
     parser.add_argument("--model", default="gp", choices=list(CANDIDATES),
                         help="surrogate whose map error is measured (default gp)")
     parser.add_argument("--name", help="output stem in benchmarks/measured/")
+    parser.add_argument("--noise", type=Path, help="noise-floor CSV of the level (default "
+                        "benchmarks/measured/noise_<level>.csv if it exists): its pooled sd over "
+                        "the held-out values' std is the nRMSE a perfect map of the mean scores")
     args = parser.parse_args(argv)
     config = load_config(ROOT / "config.yaml")
     if args.level not in config["fidelity"]:
@@ -127,7 +147,10 @@ def main(argv=None):
     sizes = sorted({int(x) for x in args.sobol_sizes.split(",") if x.strip()})
     settings = {**config["adaptive"], **{k: v for k, v in (("initial_points", args.initial),
                                                           ("batch_size", args.batch),
-                                                          ("max_runs", args.max_runs)) if v}}
+                                                          ("max_runs", args.max_runs),
+                                                          ("acquisition", args.acquisition),
+                                                          ("error_weight", args.error_weight))
+                                           if v is not None}}
     if config["sweep"]["replicates"] != 1:
         parser.error("the benchmark compares single-run designs: set sweep.replicates to 1")
     name = args.name or ("adaptive" if args.level == "default" else f"adaptive_{args.level}")
@@ -182,11 +205,13 @@ def main(argv=None):
     result = run_adaptive(evaluate, bounds, settings, exclude=held_points, on_round=score_round,
                           log=say)
     table = pd.DataFrame(rows)
-    write(table, result, args, name, settings, time.time() - t_start, held_points)
+    noise = args.noise or ROOT / f"benchmarks/measured/noise_{args.level}.csv"
+    floor = noise_floor_nrmse(noise, held) if noise.exists() else None
+    write(table, result, args, name, settings, time.time() - t_start, held_points, floor, noise)
     return 0
 
 
-def write(table, result, args, name, settings, elapsed, held_points):
+def write(table, result, args, name, settings, elapsed, held_points, floor=None, noise=None):
     out = ROOT / "benchmarks" / "measured"
     out.mkdir(parents=True, exist_ok=True)
     table.to_csv(out / f"{name}.csv", index=False)
@@ -200,9 +225,14 @@ def write(table, result, args, name, settings, elapsed, held_points):
              f"{args.held_out_seed}; never in a design). nRMSE = RMSE / std of the held-out "
              "values per metric (R^2 = 1 - nRMSE^2); mean over M_s, Q_s, R_q, Phi.", "",
              f"Adaptive design: {settings['initial_points']} Sobol points, then batches of "
-             f"{settings['batch_size']} by expected prediction error (error weight "
+             f"{settings['batch_size']} by {ACQ[settings.get('acquisition', 'mepe')]} (error weight "
              f"{settings['error_weight']}), budget {settings['max_runs']} runs; stopped by "
              f"{result.stop}.", ""]
+    if floor:
+        lines += [f"Noise floor: the seed-to-seed spread (pooled, `{Path(noise).name}`) over the held-out "
+                  "values' std, the nRMSE a perfect map of the mean would score on single runs: "
+                  + " / ".join(f"{v:.3f}" for v in floor.values())
+                  + f" (mean {np.mean(list(floor.values())):.3f}).", ""]
     for design in ("adaptive", "sobol"):
         part = table[table.design == design].sort_values("n_runs")
         reach = part[part.nrmse_mean <= full.nrmse_mean]
@@ -232,6 +262,9 @@ def write(table, result, args, name, settings, elapsed, held_points):
         ax.plot(part.n_runs, part.nrmse_mean, style, label=design)
     ax.axhline(full.nrmse_mean, color="0.6", lw=0.8, ls="--",
                label=f"{int(full.n_runs)}-run grid")
+    if floor:
+        ax.axhline(np.mean(list(floor.values())), color="0.3", lw=0.8, ls=":",
+                   label="noise floor (perfect map of the mean)")
     ax.set(xlabel="DEM runs", ylabel="mean nRMSE on held-out runs",
            title=f"Map error against runs ({args.level} level, {args.model} surrogate)")
     ax.grid(alpha=0.3)
