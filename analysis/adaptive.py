@@ -63,6 +63,8 @@ from analysis.surrogate import INPUTS, METRICS, inputs_of, save_surrogate, targe
 from analysis.workflow import atomic_path
 
 ROOT = Path(__file__).resolve().parent.parent
+#: acquisition functions of :func:`choose_batch` (``adaptive.acquisition``)
+ACQUISITIONS = ("mepe", "imse")
 
 
 def sweep_bounds(config):
@@ -213,8 +215,8 @@ def choose_batch(gp, X, candidates, batch_size, error_weight=0.5, exclude=None,
     acquisition : numpy.ndarray, shape (b,)
         a(x) of each chosen point when it was chosen (standardised units).
     """
-    if acquisition not in ("mepe", "imse"):
-        raise ValueError(f"unknown acquisition {acquisition!r}; choose mepe or imse")
+    if acquisition not in ACQUISITIONS:
+        raise ValueError(f"unknown acquisition {acquisition!r}; choose one of {ACQUISITIONS}")
     X = np.asarray(X, float)
     points, inverse = np.unique(X, axis=0, return_inverse=True)
     # leave-one-out squared error per run, standardised and summed over metrics;
@@ -291,8 +293,9 @@ class AdaptiveResult:
 
 def check_settings(settings, replicates=1):
     """Raise ValueError naming the bad ``adaptive:`` value."""
-    if settings.get("acquisition", "mepe") not in ("mepe", "imse"):
-        raise ValueError(f"adaptive.acquisition = {settings['acquisition']!r}: choose mepe or imse")
+    if settings.get("acquisition", "mepe") not in ACQUISITIONS:
+        raise ValueError(f"adaptive.acquisition = {settings['acquisition']!r}: choose one of "
+                         f"{ACQUISITIONS}")
     budget_points = int(settings["max_runs"]) // int(replicates)
     if int(settings["initial_points"]) > budget_points:
         raise ValueError(f"adaptive.initial_points = {settings['initial_points']} x "

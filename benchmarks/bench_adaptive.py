@@ -41,8 +41,8 @@ sys.path.insert(0, str(ROOT))
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from analysis.adaptive import (WorkflowEvaluator, initial_design, run_adaptive,  # noqa: E402
-                               sweep_bounds)
+from analysis.adaptive import (ACQUISITIONS, WorkflowEvaluator, initial_design,  # noqa: E402
+                               run_adaptive, sweep_bounds)
 from analysis.config import load_config  # noqa: E402
 from analysis.model_choice import CANDIDATES, make_candidate  # noqa: E402
 from analysis.surrogate import METRICS, inputs_of, targets_of  # noqa: E402
@@ -126,7 +126,7 @@ def main(argv=None):
     parser.add_argument("--initial", type=int, help="overrides adaptive.initial_points")
     parser.add_argument("--batch", type=int, help="overrides adaptive.batch_size")
     parser.add_argument("--max-runs", type=int, help="overrides adaptive.max_runs")
-    parser.add_argument("--acquisition", choices=["mepe", "imse"], help="overrides adaptive.acquisition")
+    parser.add_argument("--acquisition", choices=ACQUISITIONS, help="overrides adaptive.acquisition")
     parser.add_argument("--error-weight", type=float, help="overrides adaptive.error_weight")
     parser.add_argument("--model", default="gp", choices=list(CANDIDATES),
                         help="surrogate whose map error is measured (default gp)")

@@ -13,7 +13,7 @@ length scales, and its white-noise term the run-to-run noise.  A design's
 against the noise-free truth on a 25 x 25 grid over the sweep box
 (nRMSE = RMSE / std of the truth, mean over the four metrics).  Repeated
 ``--reps`` times (noise draws and Sobol seeds), for: the nested grids (9, 15,
-25, 45 runs), Sobol designs and the adaptive loop
+25, 27, 45 runs), Sobol designs and the adaptive loop
 (:func:`analysis.adaptive.run_adaptive`, 10 Sobol points and batches of 3, up
 to ``--max-runs``) with each acquisition (``mepe``, ``imse``), scored after
 every round.
@@ -35,7 +35,7 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-from analysis.adaptive import initial_design, run_adaptive, sweep_bounds  # noqa: E402
+from analysis.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds  # noqa: E402
 from analysis.config import load_config  # noqa: E402
 from analysis.model_choice import GPSurrogate  # noqa: E402
 from analysis.surrogate import METRICS, inputs_of, targets_of  # noqa: E402
@@ -54,6 +54,10 @@ def main(argv=None) -> int:
         parser.error(f"--dataset {args.dataset} does not exist: run `make map` first")
     config = load_config(ROOT / "config.yaml")
     data = pd.read_csv(args.dataset)
+    grid = {(float(u), float(w)) for u in config["sweep"]["U_mm_s"] for w in config["sweep"]["omega_rad_s"]}
+    if set(map(tuple, inputs_of(data).tolist())) != grid:
+        parser.error(f"--dataset {args.dataset} is not the config's {len(grid)}-point sweep grid (another "
+                     "run of the workflow, e.g. a noise-floor config, may have overwritten it): run `make map`")
     truth = GPSurrogate().fit(inputs_of(data), targets_of(data))
     noise = truth.noise_std_
     bounds = sweep_bounds(config)
@@ -91,7 +95,7 @@ def main(argv=None) -> int:
         for n in sizes:
             rows.append({"design": "sobol", "label": f"sobol {n}", "rep": rep, "n_runs": n,
                          **error(fitted(sobol.iloc[:n]))})
-        for acq in ("mepe", "imse"):
+        for acq in ACQUISITIONS:
             def score(k, frame, gp, acq=acq):
                 rows.append({"design": f"adaptive {acq}", "label": f"adaptive {acq}", "rep": rep,
                              "n_runs": len(frame), **error(gp)})
