@@ -64,11 +64,14 @@ class Frame:
     atoms : pandas.DataFrame
         One row per atom, one column per name in the ``ITEM: ATOMS`` header,
         in the header's order.
+    periodic : tuple of bool
+        Whether x, y, z are periodic (``pp`` in the ``BOX BOUNDS`` header).
     """
 
     timestep: int
     box: np.ndarray
     atoms: pd.DataFrame
+    periodic: tuple = (False, False, False)
 
 
 def read_dump(path, timestep=None, required=REQUIRED_COLUMNS) -> Frame:
@@ -107,7 +110,7 @@ def read_dump(path, timestep=None, required=REQUIRED_COLUMNS) -> Frame:
     return _parse_frame(block, path, required)
 
 
-def write_dump(path, atoms, box, timestep=0, append=False) -> None:
+def write_dump(path, atoms, box, timestep=0, append=False, periodic=(False, True, False)) -> None:
     """Write one frame in LIGGGHTS ``dump custom`` format.
 
     Parameters
@@ -124,12 +127,15 @@ def write_dump(path, atoms, box, timestep=0, append=False) -> None:
         Timestep of the frame.
     append : bool, optional
         Append the frame to an existing file instead of replacing it.
+    periodic : tuple of bool, optional
+        Periodic axes (``pp``; others ``ff``); default that of the spreading
+        scene, periodic across the roller's axis y only.
     """
     box = np.asarray(box, dtype=float).reshape(3, 2)
     bounds = "\n".join(f"{lo!r} {hi!r}" for lo, hi in box.tolist())
     header = (
         f"ITEM: TIMESTEP\n{int(timestep)}\nITEM: NUMBER OF ATOMS\n{len(atoms)}\n"
-        f"ITEM: BOX BOUNDS pp pp ff\n{bounds}\nITEM: ATOMS {' '.join(atoms.columns)} \n"
+        f"ITEM: BOX BOUNDS {' '.join('pp' if p else 'ff' for p in periodic)}\n{bounds}\nITEM: ATOMS {' '.join(atoms.columns)} \n"
     )
     body = atoms.to_csv(sep=" ", header=False, index=False, lineterminator="\n")
     mode = "at" if append else "wt"
@@ -192,13 +198,15 @@ def _parse_frame(block: bytes, path: Path, required) -> Frame:
         raise DumpError(f"{path}: timestep {timestep}: unreadable box bounds {head[5:8]}") from err
     if box.shape != (3, 2):
         raise DumpError(f"{path}: timestep {timestep}: unreadable box bounds {head[5:8]}")
+    flags = [f for f in head[4].split()[3:] if len(f) == 2 and set(f) <= set("pfsm")]
+    periodic = tuple(f == "pp" for f in flags[:3]) if len(flags) >= 3 else (False, False, False)
     names = head[8].split()[2:]
     missing = [c for c in required if c not in names]
     if missing:
         raise DumpError(f"{path}: timestep {timestep}: missing column(s) {missing} (columns: {names})")
     body = lines[_HEADER_LINES] if len(lines) > _HEADER_LINES else b""
     atoms = _parse_atoms(body, names, n_atoms, path, timestep)
-    return Frame(timestep=timestep, box=box, atoms=atoms)
+    return Frame(timestep=timestep, box=box, atoms=atoms, periodic=periodic)
 
 
 def _parse_atoms(body: bytes, names, n_atoms: int, path: Path, timestep: int) -> pd.DataFrame:

@@ -31,6 +31,7 @@ __all__ = [
     "probe_lines",
     "substrate_height",
     "layer_top",
+    "periodic_images",
     "powder_mass",
     "spread_throughput",
     "layer_roughness",
@@ -146,6 +147,45 @@ def layer_top(centres, radii, xs, ys, base):
     return h
 
 
+def periodic_images(centres, radii, box, periodic):
+    """The particles plus their periodic images that reach into the box.
+
+    A sphere within one diameter of a periodic boundary also stands, shifted
+    by the period, just beyond the opposite boundary: its cap raises the
+    surface there. Only heights use the images; mass counts each particle once.
+
+    Parameters
+    ----------
+    centres : numpy.ndarray, shape (N, 3)
+        Particle centres [m].
+    radii : numpy.ndarray, shape (N,)
+        Particle radii [m].
+    box : array_like, shape (3, 2)
+        Box bounds ``[[xlo, xhi], [ylo, yhi], [zlo, zhi]]`` [m].
+    periodic : sequence of 3 bool
+        Which axes are periodic.
+
+    Returns
+    -------
+    centres, radii : numpy.ndarray
+        The originals first, then the images.
+    """
+    centres = np.asarray(centres, dtype=float).reshape(-1, 3)
+    radii = np.asarray(radii, dtype=float)
+    box = np.asarray(box, dtype=float).reshape(3, 2)
+    for axis in np.flatnonzero(np.asarray(periodic, dtype=bool)[:2]):  # x, y: z never matters for heights
+        lo, hi = box[axis]
+        period = hi - lo
+        near_lo = centres[:, axis] < lo + 2 * radii
+        near_hi = centres[:, axis] > hi - 2 * radii
+        shifted = [centres[near_lo].copy(), centres[near_hi].copy()]
+        shifted[0][:, axis] += period
+        shifted[1][:, axis] -= period
+        centres = np.concatenate([centres, *shifted])
+        radii = np.concatenate([radii, radii[near_lo], radii[near_hi]])
+    return centres, radii
+
+
 def powder_mass(diameters, density):
     """Mass of powder in the sampling region, eq. (4).
 
@@ -224,7 +264,8 @@ def layer_porosity(mass, density, length_x, length_y, roughness):
     return (1.0 - mass / cuboid) * 100.0 if cuboid > 0 else math.nan
 
 
-def spread_layer_metrics(atoms_or_frame, region, speed, density, substrate=None, n_lines=1000, seed=0):
+def spread_layer_metrics(atoms_or_frame, region, speed, density, substrate=None, n_lines=1000, seed=0,
+                         box=None, periodic=None):
     """Spread-layer properties of one frame, eqs. (1)-(7) of the paper.
 
     Parameters
@@ -245,6 +286,10 @@ def spread_layer_metrics(atoms_or_frame, region, speed, density, substrate=None,
         Profilometer lines in each direction (``n_lines**2`` probes).
     seed : int, optional
         Seed for the line positions.
+    box, periodic : optional
+        Box bounds [m] and periodic axes (see `periodic_images`); default
+        those of a Frame (its dump's ``BOX BOUNDS`` header), none for a
+        DataFrame. Spheres across a periodic boundary raise the heights.
 
     Returns
     -------
@@ -272,9 +317,14 @@ def spread_layer_metrics(atoms_or_frame, region, speed, density, substrate=None,
     centres = atoms[["x", "y", "z"]].to_numpy(dtype=float)
     radii = atoms["radius"].to_numpy(dtype=float)
 
+    box = getattr(atoms_or_frame, "box", None) if box is None else box
+    periodic = getattr(atoms_or_frame, "periodic", (False, False, False)) if periodic is None else periodic
+    if any(periodic) and box is None:
+        raise ValueError(f"periodic axes {tuple(periodic)} need the box bounds (box=...)")
     xs, ys = probe_lines(region, n_lines, seed)
     b = substrate_height(substrate, xs, ys)
-    h = layer_top(centres, radii, xs, ys, b)
+    h = layer_top(*(periodic_images(centres, radii, box, periodic) if any(periodic) else (centres, radii)),
+                  xs, ys, b)
 
     xmin, xmax, ymin, ymax = region
     length_x, length_y = xmax - xmin, ymax - ymin

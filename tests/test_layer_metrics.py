@@ -30,6 +30,7 @@ import trimesh
 import analysis.layer_metrics as lm
 from analysis.dump import read_dump, write_dump
 from analysis.layer_metrics import (
+    periodic_images,
     layer_porosity,
     layer_roughness,
     layer_top,
@@ -249,6 +250,64 @@ def test_lattice_mass_porosity_and_packing_fraction():
     assert m["packing_fraction"] == pytest.approx(packing, abs=packing * tol_mean / (thk - tol_mean))
     p = pi * r**2 / a**2
     assert m["coverage"] == pytest.approx(p, abs=K * probe_se((f > 0).astype(float), n))
+
+
+def test_lattice_across_a_periodic_boundary_measures_as_one_inside(tmp_path):
+    """A monolayer wrapped through the periodic y boundary (a quarter of a cell shifted, so
+    a row of spheres straddles y = 0 = W) measures like the same lattice away from it: the
+    images of the straddling spheres raise the surface at both edges. Without the images
+    the layer comes out thinner than the lattice's exact value."""
+    r, a, cells, n = 50e-6, 125e-6, 8, 1000
+    width = cells * a
+    box = [[0.0, width], [0.0, width], [0.0, 1e-3]]
+    region = (0.0, width, 0.0, width)
+    wrapped = lattice(r, a, cells)
+    wrapped["y"] = (wrapped["y"] + 0.75 * a) % width  # the row at 7.5 a moves to 0.25 a: it straddles y = 0
+    path = tmp_path / "wrapped.dump"
+    write_dump(path, wrapped, box, periodic=(False, True, False))
+    frame = read_dump(path)
+    assert frame.periodic == (False, True, False)
+    thk, r_q = resting_sphere_moments(r, a * a)
+    tol_mean, tol_rq = tolerances(lattice_cell(r, a), thk, r_q, n)
+    phi = (1 - (pi * (2 * r) ** 3 / 6) / (a * a * 4 * r_q)) * 100
+    for seed in range(3):
+        inside = spread_layer_metrics(lattice(r, a, cells), region, U, RHO, n_lines=n, seed=seed)
+        across = spread_layer_metrics(frame, region, U, RHO, n_lines=n, seed=seed)
+        for m in (inside, across):
+            assert m["thk_avg"] == pytest.approx(thk, abs=tol_mean)
+            assert m["R_q"] == pytest.approx(r_q, abs=tol_rq)
+            assert m["Phi"] == pytest.approx(phi, abs=(100 - phi) * tol_rq / (r_q - tol_rq))
+        assert across["M_s"] == pytest.approx(inside["M_s"], rel=1e-12)  # mass: each sphere once
+        assert across["n_particles"] == cells**2
+    # Without the images, heights differ exactly where the straddling row's caps reach
+    # across y = W, and there the surface is the image sphere's cap (centre y = W + a/4)
+    xs, ys = probe_lines(region, n, 0)
+    centres, radii = wrapped[["x", "y", "z"]].to_numpy(), wrapped["radius"].to_numpy()
+    h_on = layer_top(*periodic_images(centres, radii, box, (False, True, False)), xs, ys, np.zeros((n, n)))
+    h_off = layer_top(centres, radii, xs, ys, np.zeros((n, n)))
+    changed = np.argwhere(h_on != h_off)
+    assert len(changed) > 0 and np.all(ys[changed[:, 1]] > width - (r - 0.25 * a))
+    px, py = xs[changed[:, 0]], ys[changed[:, 1]]
+    cx = (np.floor(px / a) + 0.5) * a
+    d2 = (px - cx) ** 2 + (py - width - 0.25 * a) ** 2
+    np.testing.assert_allclose(h_on[changed[:, 0], changed[:, 1]], r + np.sqrt(r**2 - d2), rtol=1e-12)
+
+
+def test_periodic_images_leave_a_region_away_from_the_boundary_unchanged():
+    r, a, cells = 50e-6, 125e-6, 8
+    width = cells * a
+    atoms = lattice(r, a, cells)
+    atoms["y"] = (atoms["y"] + 0.75 * a) % width
+    box = [[0.0, width], [0.0, width], [0.0, 1e-3]]
+    region = (0.0, width, 2 * a, width - 2 * a)  # a full diameter clear of y = 0 and y = W
+    on = spread_layer_metrics(atoms, region, U, RHO, n_lines=300, seed=1, box=box, periodic=(False, True, False))
+    off = spread_layer_metrics(atoms, region, U, RHO, n_lines=300, seed=1)
+    assert on == off
+    centres, radii = periodic_images(atoms[["x", "y", "z"]].to_numpy(), atoms["radius"].to_numpy(), box,
+                                     (False, True, False))
+    assert len(radii) == cells**2 + 2 * cells  # the straddling row (near both edges) imaged once each way
+    with pytest.raises(ValueError, match="box"):
+        spread_layer_metrics(atoms, region, U, RHO, n_lines=10, periodic=(False, True, False))
 
 
 # ---------------------------------------------------------------- mesh substrates
