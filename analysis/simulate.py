@@ -108,13 +108,21 @@ def skin(s: Scene) -> float:
 # --------------------------------------------------------------------------
 # Geometry
 
-def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path = Path(".")) -> dict:
+def substrate_seed(config: dict, replicate: int = 0) -> int:
+    """Seed of the substrate's random field for ``replicate``: every replicate is a new
+    heap packing *and* a new realisation of the same rough surface (same Sq and
+    correlation length), so the seed-to-seed spread includes the substrate's."""
+    return config["substrate"]["seed"] + replicate
+
+
+def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path = Path("."),
+                  replicate: int = 0) -> dict:
     """Write ``substrate.stl``, ``roller.stl`` (closed) and ``roller_shell.stl``
     (its lateral surface, what the periodic strip loads) into ``outdir``.
 
-    A user's STL (``substrate.stl`` in the config, metres) replaces the
-    generated substrate; it must cover the bed, and no substrate peak may reach
-    the roller.
+    The generated substrate is realisation :func:`substrate_seed` of ``replicate``.
+    A user's STL (``substrate.stl`` in the config, metres) replaces it for every
+    replicate; it must cover the bed, and no substrate peak may reach the roller.
     """
     s, out = scene(config, level), Path(outdir)
     if s.substrate["stl"]:
@@ -128,7 +136,7 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
     else:
         sub = s.substrate
         substrate = geometry.rough_substrate(s.substrate_x, s.strip_width, sub["grid_spacing"],
-                                             sub["correlation_length"], sub["sq"], sub["seed"],
+                                             sub["correlation_length"], sub["sq"], substrate_seed(config, replicate),
                                              rough_x=s.rough_x, taper=ROUGH_TAPER,
                                              peak_cap=PEAK_CAP * s.roller_gap)
         clipped_sq = geometry.substrate_rms(substrate, s.rough_x)[1]
@@ -149,7 +157,8 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
              "roller_shell": geometry.write_stl(
                  geometry.roller(2 * s.roller_radius, s.strip_width, s.roller_facets, capped=False),
                  out / "roller_shell.stl")}
-    return {**{k: str(v) for k, v in paths.items()}, "substrate_mean_m": mean, "substrate_sq_m": sq,
+    return {**{k: str(v) for k, v in paths.items()}, "substrate_seed": None if s.substrate["stl"] else
+            substrate_seed(config, replicate), "substrate_mean_m": mean, "substrate_sq_m": sq,
             "substrate_peak_m": float(peak), "substrate_triangles": len(substrate.faces)}
 
 
@@ -237,13 +246,17 @@ def _publish(out: Path, summary: dict, *names: str) -> None:
     os.replace(out / "health.json.part", out / "health.json")
 
 
-def heap_supply(ahead: int) -> dict:
-    """Powder left ahead of the roller when it stops (``ahead`` particles). None
-    left means the heap ran out before the roller reached the end of the
-    sampling region (forward rolling lays several layers and eats a small
-    heap): the layer there is supply-limited, its M_s and Q_s lower bounds of
-    the scene's physics."""
-    return {"particles_ahead_of_roller": int(ahead), "heap_exhausted": ahead == 0}
+def heap_supply(ahead: int, heap_particles: int) -> dict:
+    """Powder left ahead of the roller when it stops, ``run_out_mm`` past the
+    sampling region (``ahead`` particles of a heap of ``heap_particles``).
+
+    ``supply_margin`` is that share of the heap; none left (``heap_exhausted``)
+    means the heap ran out before the roller reached the end of the sampling
+    region (forward rolling lays several layers and eats a small heap): the
+    layer there is supply-limited, its M_s and Q_s lower bounds of the scene's
+    physics."""
+    return {"particles_ahead_of_roller": int(ahead), "supply_margin": ahead / heap_particles,
+            "heap_exhausted": ahead == 0}
 
 
 def _check_timestep(log: dict, s: Scene) -> None:
@@ -290,7 +303,7 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     health = layer_health(atoms, s, meshes / "substrate.stl", s.heap_particles - strays)
     health["strays_removed"] = strays
     health["heap_toe_m"] = float(atoms["x"].max() + atoms["radius"].max())
-    summary = {"wall_s": log["wall_s"], "steps": int(log["thermo"]["Step"].iloc[-1]),
+    summary = {"wall_s": log["wall_s"], "cpu_s": log["cpu_s"], "steps": int(log["thermo"]["Step"].iloc[-1]),
                "timestep_s": s.timestep, "rayleigh_fraction": log["max_rayleigh_fraction"],
                "hertz_fraction": log["max_hertz_fraction"], "inserted": log["inserted"], **peak, **health}
     _publish(out, summary, "settled.restart", "settled.dump")
@@ -437,10 +450,10 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     ahead = int(log["printed"]["particles_ahead_of_roller"])
     removed = ahead if "remove_ahead" in skips else 0
     health.update(through_roller=inside, **layer_health(atoms, s, meshes / "substrate.stl", len(atoms0) - removed))
-    health.update(heap_supply(ahead), removed_ahead_of_roller=removed)
+    health.update(heap_supply(ahead, s.heap_particles), removed_ahead_of_roller=removed)
     thermo = log["thermo"]
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
-    summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"],
+    summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"], "cpu_s": log["cpu_s"],
                "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
                "processors": context["processors"],
                "roller_start_m": x0, "roller_travel_m": speed * travel_steps * s.timestep,

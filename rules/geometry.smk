@@ -1,16 +1,16 @@
 rule geometry:
-    """Rough substrate (or the user's STL) and roller meshes of the level."""
+    """Rough substrate (a new realisation per replicate, or the user's STL) and roller meshes of the level."""
     output:
-        substrate=f"{OUT}/meshes/substrate.stl",
-        roller=f"{OUT}/meshes/roller.stl",
-        roller_shell=f"{OUT}/meshes/roller_shell.stl",
-        summary=f"{OUT}/meshes/geometry.json",
+        substrate=f"{OUT}/meshes/r{{rep}}/substrate.stl",
+        roller=f"{OUT}/meshes/r{{rep}}/roller.stl",
+        roller_shell=f"{OUT}/meshes/r{{rep}}/roller_shell.stl",
+        summary=f"{OUT}/meshes/r{{rep}}/geometry.json",
     params:
         level=LEVEL,
         physics=GEOMETRY_FINGERPRINT,
     log:
-        f"{LOGS}/geometry.log",
+        f"{LOGS}/geometry/r{{rep}}.log",
     benchmark:
-        f"{BENCH}/geometry.tsv"
+        f"{BENCH}/geometry/r{{rep}}.tsv"
     script:
         "../scripts/geometry.py"
