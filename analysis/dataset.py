@@ -12,19 +12,32 @@ import pandas as pd
 from analysis.simulate import MAX_OVERLAP
 
 METRICS = ["mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"]
-HEALTH = ["heap_exhausted", "particles_ahead_of_roller", "removed_ahead_of_roller", "atoms", "lost", "through_substrate",
-          "through_roller", "max_overlap_fraction", "peak_speed_m_s", "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m"]
+HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "removed_ahead_of_roller", "atoms", "lost", "through_substrate",
+          "through_roller", "max_overlap_fraction", "peak_speed_m_s", "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m", "cpu_s"]
 
 
 class UnsoundRunError(ValueError):
     """A run's health or metrics rule it out of the dataset."""
 
 
-def check_run(row: dict) -> None:
+class SupplyLimitedError(UnsoundRunError):
+    """A run's heap ran dry before the end of the sampling region."""
+
+
+def check_run(row: dict, level: str = "default", keep_supply_limited: bool = False) -> None:
     """Raise :class:`UnsoundRunError` naming the run and what is wrong with it.
 
-    An empty sampling region is refused unless the heap was exhausted (then it
-    is a measurement of no powder: the row keeps ``heap_exhausted`` = True)."""
+    A run whose heap ran out before the roller passed the end of the sampling
+    region (``heap_exhausted``: its M_s and Q_s are lower bounds) raises
+    :class:`SupplyLimitedError` naming ``fidelity.<level>.heap_particles``,
+    unless ``keep_supply_limited`` (then the row is kept, marked by
+    ``heap_exhausted`` = True, and an empty region is a measurement of no powder)."""
+    name = f"run U={row['U_mm_s']:g} mm/s, omega={row['omega_rad_s']:g} rad/s, replicate {row['replicate']}"
+    if row["heap_exhausted"] and not keep_supply_limited:
+        raise SupplyLimitedError(
+            f"{name}: the heap ran dry before the end of the sampling region (supply-limited: M_s and Q_s "
+            f"would be lower bounds); raise fidelity.{level}.heap_particles, or set keep_supply_limited_runs: "
+            "true to keep such runs (the maps mark them)")
     problems = [f"{key} = {row[key]}" for key in ("lost", "through_substrate", "through_roller") if row.get(key)]
     if row.get("peak_speed_m_s") is not None and not np.isfinite(row["peak_speed_m_s"]):
         problems.append("peak_speed_m_s is not finite (kinetic energy blew up)")
@@ -34,21 +47,26 @@ def check_run(row: dict) -> None:
     if row["n_particles"] == 0 and not row["heap_exhausted"]:
         problems.append("no particle in the sampling region (empty layer) with powder still ahead of the roller")
     if problems:
-        raise UnsoundRunError(f"run U={row['U_mm_s']:g} mm/s, omega={row['omega_rad_s']:g} rad/s, "
-                              f"replicate {row['replicate']}: " + "; ".join(problems))
+        raise UnsoundRunError(f"{name}: " + "; ".join(problems))
 
 
-def build_dataset(metrics_files, health_files, benchmark_files, out) -> pd.DataFrame:
+def build_dataset(metrics_files, health_files, benchmark_files, out, level: str = "default",
+                  keep_supply_limited: bool = False) -> pd.DataFrame:
     """Join per-run ``metrics.json``, ``health.json`` and Snakemake benchmark
-    TSVs (same order) into ``out`` (CSV, written atomically)."""
+    TSVs (same order) into ``out`` (CSV, written atomically), each run checked
+    by :func:`check_run`.
+
+    ``cpu_s`` is LIGGGHTS' own CPU time (user + system of the launched
+    process and its ranks, ``health.json``); Snakemake's benchmark sampling
+    misses part of it and gives only ``max_rss_MB`` and ``benchmark_cpu_s``."""
     rows = []
     for metrics, health, bench in zip(metrics_files, health_files, benchmark_files, strict=True):
         row = json.loads(Path(metrics).read_text())
         h = json.loads(Path(health).read_text())
         row.update({key: h.get(key) for key in HEALTH})
         b = pd.read_csv(bench, sep="\t").iloc[-1]
-        row.update({"cpu_s": float(b["cpu_time"]), "max_rss_MB": float(b["max_rss"])})
-        check_run(row)
+        row.update({"benchmark_cpu_s": float(b["cpu_time"]), "max_rss_MB": float(b["max_rss"])})
+        check_run(row, level, keep_supply_limited)
         rows.append(row)
     table = pd.DataFrame(rows).sort_values(["U_mm_s", "omega_rad_s", "replicate"], ignore_index=True)
     tmp = Path(f"{out}.tmp")

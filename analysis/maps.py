@@ -67,6 +67,14 @@ def save_figure(fig, outdir, stem):
     return paths
 
 
+def supply_limited(df):
+    """Boolean mask of the runs whose heap ran dry before the region's end (kept only
+    with ``keep_supply_limited_runs``): their M_s and Q_s are lower bounds."""
+    if "heap_exhausted" not in df:
+        return np.zeros(len(df), dtype=bool)
+    return df["heap_exhausted"].astype(str).str.lower().eq("true").to_numpy()
+
+
 def surface_figure(model, df, split, metric, n=41):
     """The regressed surface of one metric over (omega, U), as the paper's Figures 6-9 (a).
 
@@ -100,6 +108,11 @@ def surface_figure(model, df, split, metric, n=41):
     for rows, colour, label in ((split[0], _TRAIN, "training runs"), (split[1], _TEST, "test runs")):
         ax.scatter(X[rows, 1], X[rows, 0], df[metric].to_numpy(float)[rows], color=colour,
                    s=22, depthshade=False, label=f"{label} ({len(rows)})")
+    limited = supply_limited(df)
+    if limited.any():
+        ax.scatter(X[limited, 1], X[limited, 0], df[metric].to_numpy(float)[limited], facecolor="none",
+                   edgecolor="tab:red", s=90, linewidth=1.5, depthshade=False,
+                   label=f"supply-limited: a lower bound ({limited.sum()})")
     _replicate_ranges(ax, df, metric)
     ax.set_xlabel(LABELS["omega_rad_s"], labelpad=8)
     ax.set_ylabel(LABELS["U_mm_s"], labelpad=8)
@@ -306,6 +319,10 @@ def process_map_figure(model, df, split, n=101):
                zorder=3, label="simulated runs (training)")
     ax.scatter(runs_t[split[1]], runs_d[split[1]], color="k", s=28, zorder=3,
                label="simulated runs (test)")
+    limited = supply_limited(df)
+    if limited.any():
+        ax.scatter(np.asarray(runs_t)[limited], np.asarray(runs_d)[limited], facecolor="none", edgecolor="tab:red",
+                   s=80, linewidth=1.5, zorder=4, label="supply-limited run (heap ran dry)")
     ax.set_xlabel(r"throughput index  $Q_s/\max(Q_s)\cdot M_s/\max(M_s)$")
     ax.set_ylabel(r"defect index  $R_q/\max(R_q)\cdot \Phi/\max(\Phi)$")
     ax.margins(x=0.15, y=0.06)   # room for the line labels

@@ -90,3 +90,17 @@ def test_render_maps_script(fitted, dataset, tmp_path, fake_snakemake):
     runpy.run_path(str(smk.scriptdir / "render_maps.py"), init_globals={"snakemake": smk})
     paths = sorted((tmp_path / "maps").iterdir())
     _check_figures(paths, tmp_path / "maps")
+
+
+def test_supply_limited_runs_are_ringed_on_the_surfaces_and_the_process_map(fitted, dataset):
+    from analysis.maps import process_map_figure, supply_limited, surface_figure
+    model, scores = fitted
+    split = (np.arange(35), np.arange(35, 45))
+    limited = dataset.assign(heap_exhausted=dataset["omega_rad_s"] <= -15)
+    assert supply_limited(limited).sum() == 10 and not supply_limited(dataset).any()
+    assert supply_limited(limited.astype({"heap_exhausted": str})).sum() == 10  # as read back from the CSV
+    for fig in (surface_figure(model, limited, split, "mass_g", n=11), process_map_figure(model, limited, split, n=21)):
+        labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+        assert any("supply-limited" in label for label in labels), labels
+    labels = [t.get_text() for t in surface_figure(model, dataset, split, "mass_g", n=11).axes[0].get_legend().get_texts()]
+    assert not any("supply-limited" in label for label in labels)

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.dataset import UnsoundRunError, check_run
+from analysis.dataset import SupplyLimitedError, UnsoundRunError, check_run
 from analysis.run_liggghts import LiggghtsError
 from analysis.simulate import (BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR, check_kinetic_energy, make_geometry,
                                settle, through_roller)
@@ -69,6 +69,17 @@ def test_dataset_refuses_an_unsound_run_naming_it(change, message):
     with pytest.raises(UnsoundRunError, match=message) as err:
         check_run(healthy_row(**change))
     assert "U=70 mm/s, omega=-5 rad/s, replicate 0" in str(err.value)
+
+
+def test_a_supply_limited_run_is_refused_naming_the_key_unless_kept():
+    dry = healthy_row(heap_exhausted=True, n_particles=0)
+    with pytest.raises(SupplyLimitedError, match=r"raise fidelity\.smoke\.heap_particles") as err:
+        check_run(dry, "smoke")
+    assert "U=70 mm/s, omega=-5 rad/s, replicate 0" in str(err.value)
+    assert "keep_supply_limited_runs" in str(err.value)
+    check_run(dry, "smoke", keep_supply_limited=True)  # kept: an empty region measures no powder
+    with pytest.raises(UnsoundRunError, match="empty layer"):  # but not with powder still ahead
+        check_run(healthy_row(n_particles=0), "smoke", keep_supply_limited=True)
 
 
 def test_time_step_above_the_guard_is_refused_before_liggghts_runs(config, tmp_path):

@@ -52,6 +52,40 @@ def test_dataset_has_one_sane_row_per_run(workflow):
     # eq. 5: Q_s = U thk_avg
     assert np.allclose(data.throughput_mm2_s, data.U_mm_s * data.thickness_um * 1e-3)
     assert np.all(data.wall_s > 0) and np.all(data.steps > 0)
+    # the smoke scene's heap lasts at the points the tests use; LIGGGHTS' own CPU time is the cost
+    assert not data.heap_exhausted.any() and np.all((data.supply_margin > 0) & (data.supply_margin < 1))
+    assert np.all(data.cpu_s > 0.5 * data.wall_s)
+
+
+def test_deposit_profile_shows_the_layer_along_the_travel(workflow):
+    out = workflow / "results/smoke"
+    profiles = pd.read_csv(out / "deposit_profile.csv")
+    assert sorted(set(zip(profiles.U_mm_s, profiles.omega_rad_s))) == [(85, -10), (85, 0), (85, 10)]
+    in_region = profiles[(profiles.x_mm > 4.5) & (profiles.x_mm < 6.5)]
+    # mass per area in the region: the dataset's M_s over the region's 2 x 1 mm
+    data = pd.read_csv(out / "dataset.csv").set_index(["U_mm_s", "omega_rad_s"])
+    for (U, w), group in in_region.groupby(["U_mm_s", "omega_rad_s"]):
+        expected = data.loc[(U, w), "mass_g"] * 1e3 / 2.0  # mg/mm^2
+        assert group.areal_mass_mg_mm2.mean() == pytest.approx(expected, rel=0.15)
+    assert (out / "deposit_profile.png").stat().st_size > 20_000
+
+
+def test_a_heap_that_runs_dry_is_refused_by_name_unless_kept(tmp_path):
+    """A smoke scene with a 60-particle heap runs dry at omega = -10 rad/s: the dataset rule
+    refuses it naming the key to raise; keep_supply_limited_runs keeps and marks it."""
+    base = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-d", str(tmp_path),
+            "--configfile", str(ROOT / "config.yaml"), "--cores", "2", "results/smoke/dataset.csv", "--config",
+            "level=smoke", 'sweep={"U_mm_s": [100], "omega_rad_s": [-10, 0, 5, 10], "replicates": 1}',
+            'surrogate={"n_test": 1}', 'fidelity={"smoke": {"heap_particles": 60}}']
+    proc = subprocess.run([*base, "keep_supply_limited_runs=false"], capture_output=True, text=True)
+    assert proc.returncode != 0
+    assert "raise fidelity.smoke.heap_particles" in proc.stderr
+    assert not (tmp_path / "results/smoke/dataset.csv").exists()
+    proc = subprocess.run([*base, "keep_supply_limited_runs=true"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    data = pd.read_csv(tmp_path / "results/smoke/dataset.csv")
+    dry = data[data.omega_rad_s == -10].iloc[0]
+    assert dry.heap_exhausted and dry.supply_margin == 0.0
 
 
 def test_surrogate_scores_maps_and_grid_are_made(workflow):
