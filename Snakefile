@@ -25,13 +25,14 @@ include: "rules/maps.smk"
 
 
 # On a cluster (profiles/slurm) only settle and spread are submitted; the rest is light.
-localrules: all, geometry, layer_metrics, dataset, trends, noise_floor, model_choice, surrogate, maps, top_view
+localrules: all, geometry, layer_metrics, dataset, deposit_profile, trends, noise_floor, model_choice, surrogate, maps, top_view
 
 
 rule all:
     input:
         f"{OUT}/dataset.csv",
         f"{OUT}/trends.md",
+        f"{OUT}/deposit_profile.png",
         f"{OUT}/surrogate/noise_floor.md",
         f"{OUT}/surrogate/model_choice.md",
         f"{OUT}/surrogate/scores.json",

@@ -1,4 +1,5 @@
 # Shared by every rule file: the checked configuration, the fidelity level and the runs.
+from analysis.deposit import profile_runs as deposit_profile_runs  # noqa: E402
 from analysis.config import (ConfigError, design_points, load_config, run_name, scene,  # noqa: E402
                              simulation_fingerprint)
 
@@ -24,6 +25,8 @@ BENCH = f"results/benchmarks/{LEVEL}"
 # a point already run under another design is reused.
 POINTS = design_points(CONFIG)
 RUNS = [run_name(U, w, r) for U, w in POINTS for r in range(CONFIG["sweep"]["replicates"])]
+# Deposit profiles: the middle U, the omegas nearest -10, 0, +10 rad/s, every replicate.
+PROFILE_RUNS = deposit_profile_runs(POINTS, CONFIG["sweep"]["replicates"])
 # Top views (the paper's Figure 4): the fastest U at the omegas nearest -5, 0, +5 rad/s.
 _U_MAX = max(U for U, _ in POINTS)
 _OMEGAS = sorted({min([w for U, w in POINTS if U == _U_MAX], key=lambda w: abs(w - t)) for t in (-5, 0, 5)})

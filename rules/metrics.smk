@@ -41,3 +41,19 @@ rule trends:
         f"{LOGS}/trends.log",
     script:
         "../scripts/trends.py"
+
+
+rule deposit_profile:
+    """Layer mass along the travel for a few omegas, sampling region shaded: is the region in steady state?"""
+    input:
+        [f"{OUT}/runs/{run_name(U, w, r)}/final.dump" for U, w, r in PROFILE_RUNS],
+    output:
+        csv=f"{OUT}/deposit_profile.csv",
+        png=report(f"{OUT}/deposit_profile.png", caption="../report/deposit_profile.rst", category="Dataset"),
+    params:
+        level=LEVEL,
+        runs=PROFILE_RUNS,
+    log:
+        f"{LOGS}/deposit_profile.log",
+    script:
+        "../scripts/deposit_profile.py"
