@@ -107,6 +107,9 @@ def profile_figure(profiles: pd.DataFrame, region_mm: tuple, title: str = ""):
         line, = ax.plot(stats.index, stats["mean"], lw=1.5, label=f"U = {U:g} mm/s, ω = {omega:g} rad/s")
         if group["replicate"].nunique() > 1:
             ax.fill_between(stats.index, stats["min"], stats["max"], color=line.get_color(), alpha=0.2, lw=0)
+    laid = profiles.loc[profiles["areal_mass_mg_mm2"] > 0, "x_mm"]
+    if len(laid):
+        ax.set_xlim(laid.min() - 0.5, profiles["x_mm"].max() + 0.5)
     ax.set_xlabel("x along the travel (mm)")
     ax.set_ylabel("layer mass per area (mg/mm$^2$)")
     ax.set_title(title or "Deposit profiles")
@@ -122,3 +125,23 @@ def profile_runs(points, replicates: int, targets=(-10.0, 0.0, 10.0)) -> list[tu
     omegas = sorted({w for u, w in points if u == U})
     chosen = sorted({min(omegas, key=lambda w: abs(w - t)) for t in targets})
     return [(U, w, r) for w in chosen for r in range(replicates)]
+
+
+def pile_ahead(profile: pd.DataFrame, heap_mass_per_width: float) -> np.ndarray:
+    """Powder still ahead of the roller when its axis passed each bin [mg/mm], by mass balance.
+
+    Parameters
+    ----------
+    profile : pandas.DataFrame
+        One run's :func:`deposit_profile` (``x_mm``, ``areal_mass_mg_mm2``), covering
+        every bin behind the roller's final position.
+    heap_mass_per_width : float
+        The settled heap's mass per mm of strip width [mg/mm].
+
+    Returns
+    -------
+    numpy.ndarray
+        Heap mass per width less everything deposited up to each bin's far edge [mg/mm].
+    """
+    step = np.diff(profile["x_mm"].to_numpy()[:2])[0] if len(profile) > 1 else 0.0
+    return heap_mass_per_width - np.cumsum(profile["areal_mass_mg_mm2"].to_numpy() * step)

@@ -10,7 +10,7 @@ from analysis.workflow import atomic_path, rule_context  # noqa: E402
 with rule_context(snakemake) as config:
     s = scene(config, snakemake.params.level)
     runs = [{"U_mm_s": U, "omega_rad_s": w, "replicate": r} for U, w, r in snakemake.params.runs]
-    profiles = run_profiles(snakemake.input, runs, s.density, s.strip_width, (0.0, s.travel_end))
+    profiles = run_profiles(snakemake.input, runs, s.density, s.strip_width, (s.box[0], s.travel_end))
     with atomic_path(snakemake.output.csv) as tmp:
         profiles.to_csv(tmp, index=False)
     region = tuple(v * 1e3 for v in s.sampling_region[:2])
