@@ -16,8 +16,8 @@ Reads each level's finished runs (every run folder's ``metrics.json``, ``health.
   (:func:`analysis.deposit.steady_state_start`, plateau: the region's far half);
 - ``deposit_pile.csv``, ``.png``: per bin past the heap's toe, the layer's areal mass against
   the powder still ahead of the roller (mass balance): does the deposit depend on the pile?
-- ``<name>.csv``, ``.md``, ``.png``: one row per scene, the levels as run and the
-  reference re-measured over a later start or a shorter region (the layer behind the
+- ``<name>.csv``, ``.md``, ``.png``: one row per scene, each level measured over the
+  reference's steady region, and the reference re-measured over an earlier start or a shorter region (the layer behind the
   roller does not depend on where the roller goes next, so these are measured on the
   reference's own dumps; their cost is scaled by their share of the travel): CPU time
   per run, and per metric the largest difference of point means from the reference's,
@@ -181,8 +181,11 @@ def main(argv=None) -> int:
         runs = remeasure(config, args.reference, ref, (start, start + length))
         shorter = (travel - (region_mm[1] - start - length)) / travel
         rows.append(compare(f"{args.reference}, region {start:g}-{start + length:g} mm", runs, ref_means, sd, shorter))
-    for level in [lv for lv in args.levels.split(",") if lv]:
-        rows.append(compare(level, level_runs(config, level), ref_means, sd))
+    for level in [lv for lv in args.levels.split(",") if lv]:  # over the reference's steady region
+        runs = level_runs(config, level)
+        end = min(region_mm[1], scene(config, level).sampling_region[1] * 1e3)
+        rows.append(compare(f"{level} (region {steady_from:g}-{end:g} mm)",
+                            remeasure(config, level, runs, (max(steady_from, region_mm[0]), end)), ref_means, sd))
     table = pd.DataFrame(rows)
     table.to_csv(out / f"{args.name}.csv", index=False)
     ref_mean = ref_means.abs().mean()
