@@ -103,7 +103,7 @@ def test_adaptive_beats_a_quasi_random_design_of_the_same_size():
     """On the broad feature the adaptive map (22 runs) is better than a Sobol design's.
 
     (On the sharp one it finds the feature but, its GP being stationary, its map
-    error at 19-22 runs is no better than Sobol's: see the README.)"""
+    error at 19-22 runs is no better than Sobol's: see docs/uncertainty.md.)"""
     from analysis.model_choice import GPSurrogate
     result = run_adaptive(Synthetic(function=broad_feature), BOUNDS, {**SETTINGS, "max_runs": 22},
                           log=lambda line: None)
