@@ -103,11 +103,11 @@ def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str |
     check_seeds(input_file.read_text())
     screen = log_file.with_name(log_file.name + ".screen")
     cmd = mpi_command(ranks) + [LIGGGHTS, "-in", str(input_file), "-log", str(log_file)]
-    start, cpu_start = time.perf_counter(), _children_cpu()
+    start, cpu_start = time.perf_counter(), children_cpu()
     with open(screen, "w") as out:
         proc = subprocess.run(cmd, cwd=cwd or input_file.parent, stdout=out, stderr=subprocess.STDOUT,
                               stdin=subprocess.DEVNULL)
-    wall, cpu = time.perf_counter() - start, _children_cpu() - cpu_start
+    wall, cpu = time.perf_counter() - start, children_cpu() - cpu_start
     log_text = log_file.read_text(errors="replace") if log_file.exists() else ""
     screen_text = screen.read_text(errors="replace")
     error = _error_message(log_text + "\n" + screen_text)
@@ -126,7 +126,7 @@ def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str |
     return parsed
 
 
-def _children_cpu() -> float:
+def children_cpu() -> float:
     """User + system CPU seconds of this process's finished children (LIGGGHTS, or the
     MPI launcher and every rank it waited for): the run's true cost, which Snakemake's
     ``benchmark:`` sampling misses part of."""

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import copy
 import platform
-import resource
 import sys
 import tempfile
 import time
@@ -40,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 from analysis.config import load_config, scene  # noqa: E402
 from analysis.dump import read_dump  # noqa: E402
 from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
-from analysis.run_liggghts import LiggghtsError  # noqa: E402
+from analysis.run_liggghts import LiggghtsError, children_cpu  # noqa: E402
 from analysis.simulate import make_geometry, settle, spread  # noqa: E402
 
 METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
@@ -83,11 +82,6 @@ def variant_config(base: dict, level: str, overrides: dict) -> dict:
             target = target[part]
         target[path[-1]] = value
     return config
-
-
-def children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def short_error(err: Exception) -> str:
