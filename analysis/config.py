@@ -21,6 +21,10 @@ import yaml
 SCHEMA_PATH = Path(__file__).with_name("schemas") / "config.schema.yaml"
 #: Solid fraction assumed when sizing the insertion region of the heap.
 INSERTION_SOLID_FRACTION = 0.2
+#: Solid fraction of a loose pile: sizes the feed zone ahead of the roller.
+PILE_SOLID_FRACTION = 0.55
+#: The feed zone holds this many times the fed pile's bulk volume (room for its slope and toe).
+FEED_ZONE_ROOM = 2.0
 
 
 class ConfigError(ValueError):
@@ -111,6 +115,13 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
         if width > lvl["strip_width_mm"]:
             _fail(f"fidelity.{name}.sampling_width_mm", width,
                   f"exceeds the strip width {lvl['strip_width_mm']} mm")
+        pile = lvl.get("feed_pile_mg_per_mm")
+        if pile is not None:
+            try:
+                feed_length(pile * 1e-3, config["material"]["density_kg_m3"], config["roller"]["diameter_mm"] / 2e3,
+                            config["roller"]["gap_um"] * 1e-6)
+            except ValueError as err:
+                _fail(f"fidelity.{name}.feed_pile_mg_per_mm", pile, str(err))
         if lvl["sampling_start_mm"] < lvl["heap_length_mm"]:
             _fail(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
                   f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")
@@ -258,6 +269,8 @@ class Scene:
     runtime_min: int | None      # cluster wall-clock limit of a settle or spread job [min]; None: the cluster's
     mem_mb_per_rank: int | None  # cluster memory per MPI rank [MB]; None: the cluster's
     checkpoints_per_run: int     # restart files written over a spread's travel (0: none)
+    feed_pile_mass: float | None  # powder mass [kg] held ahead of the roller over the strip; None: no feed
+    feed_length: float      # x-extent [m] of the feed zone ahead of the roller axis (0 without feed)
     substrate: dict
     substrate_x: tuple      # (xlo, xhi) the substrate must cover: the whole box [m]
     rough_x: tuple          # (xlo, xhi) where the substrate is rough (around the sampling region) [m]
@@ -272,6 +285,25 @@ class Scene:
 def number_mean_volume(diameters, mass_fractions) -> float:
     """Number-mean particle volume [m^3] of size classes weighted by mass."""
     return float(1.0 / np.sum(np.asarray(mass_fractions) / (pi / 6 * np.asarray(diameters) ** 3)))
+
+
+def feed_length(pile_per_width: float, density: float, radius: float, gap: float) -> float:
+    """Length [m] ahead of the roller axis of the feed zone for a pile of
+    ``pile_per_width`` [kg/m of strip width].
+
+    The zone is the wedge between the bed and the roller's front (height
+    ``gap + R - sqrt(R^2 - x^2)`` at ``x`` ahead of the axis); it is made long
+    enough to hold :data:`FEED_ZONE_ROOM` times the pile's bulk cross-section
+    (solid fraction :data:`PILE_SOLID_FRACTION`).
+    """
+    x = np.linspace(0.0, 0.95 * radius, 20001)
+    height = gap + radius - np.sqrt(radius**2 - x**2)
+    wedge = np.concatenate([[0.0], np.cumsum(np.diff(x) * (height[1:] + height[:-1]) / 2)])
+    need = FEED_ZONE_ROOM * pile_per_width / (density * PILE_SOLID_FRACTION)
+    if need > wedge[-1]:
+        raise ValueError(f"a pile of {pile_per_width * 1e3:.4g} mg/mm does not fit twice in the wedge ahead of the "
+                         f"roller (at most {wedge[-1] * density * PILE_SOLID_FRACTION / FEED_ZONE_ROOM * 1e3:.3g})")
+    return float(np.interp(need, wedge, x))
 
 
 def scene(config: dict, level: str | None = None) -> Scene:
@@ -297,8 +329,14 @@ def scene(config: dict, level: str | None = None) -> Scene:
     t_r = rayleigh_time(diameters.min() / 2, mat["density_kg_m3"], mat["youngs_modulus_dem_Pa"],
                         mat["poisson_ratio"])
     sub = config["substrate"]
+    pile = lvl.get("feed_pile_mg_per_mm")
+    feed_pile_mass = None if pile is None else pile * 1e-6 / mm * width
+    try:
+        feed_len = 0.0 if pile is None else feed_length(feed_pile_mass / width, mat["density_kg_m3"], radius, gap)
+    except ValueError as err:
+        _fail(f"fidelity.{level}.feed_pile_mg_per_mm", pile, str(err))
     box = (-(2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
-           sample_x1 + lvl["run_out_mm"] * mm + radius + 2 * mm,
+           sample_x1 + lvl["run_out_mm"] * mm + max(radius, feed_len) + 2 * mm,
            0.0, width,
            -max(gap, 6 * sub["sq_um"] * um) - 0.2 * mm, gap + 2 * radius + 5 * mm)
     return Scene(
@@ -319,6 +357,7 @@ def scene(config: dict, level: str | None = None) -> Scene:
         profilometer_lines=lvl["profilometer_lines"], mpi_ranks=lvl["mpi_ranks"],
         runtime_min=lvl.get("runtime_min"), mem_mb_per_rank=lvl.get("mem_mb_per_rank"),
         checkpoints_per_run=lvl.get("checkpoints_per_run", 0),
+        feed_pile_mass=feed_pile_mass, feed_length=feed_len,
         substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
                    "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "stl": sub["stl"]},
         rough_x=(sample_x0 - 0.5 * mm, sample_x1 + 0.5 * mm),

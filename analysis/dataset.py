@@ -12,7 +12,7 @@ import pandas as pd
 from analysis.simulate import MAX_OVERLAP
 
 METRICS = ["mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"]
-HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "removed_ahead_of_roller", "atoms", "lost", "through_substrate",
+HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller", "atoms", "lost", "through_substrate",
           "through_roller", "max_overlap_fraction", "peak_speed_m_s", "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m", "cpu_s"]
 
 
@@ -36,8 +36,9 @@ def check_run(row: dict, level: str = "default", keep_supply_limited: bool = Fal
     if row["heap_exhausted"] and not keep_supply_limited:
         raise SupplyLimitedError(
             f"{name}: the heap ran dry before the end of the sampling region (supply-limited: M_s and Q_s "
-            f"would be lower bounds); raise fidelity.{level}.heap_particles, or set keep_supply_limited_runs: "
-            "true to keep such runs (the maps mark them)")
+            f"would be lower bounds); raise fidelity.{level}.heap_particles or feed the pile "
+            f"(fidelity.{level}.feed_pile_mg_per_mm), or set keep_supply_limited_runs: true to keep such runs "
+            "(the maps mark them)")
     problems = [f"{key} = {row[key]}" for key in ("lost", "through_substrate", "through_roller") if row.get(key)]
     if row.get("peak_speed_m_s") is not None and not np.isfinite(row["peak_speed_m_s"]):
         problems.append("peak_speed_m_s is not finite (kinetic energy blew up)")

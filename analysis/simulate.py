@@ -18,7 +18,7 @@ import json
 import os
 import shutil
 import sys
-from math import ceil
+from math import ceil, sqrt
 from pathlib import Path
 
 import numpy as np
@@ -365,6 +365,49 @@ def checkpoint_plan(travel_steps: int, count: int, resume_step: int = 0) -> list
     return list(zip(steps, [resume_step or None] + steps[:-1]))
 
 
+#: Travel [m] of the roller between two top-ups of a fed pile (``feed_pile_mg_per_mm``):
+#: the pile dips by at most the layer laid over it (about 2 % of a 20 mg/mm pile).
+FEED_EVERY = 0.5e-3
+
+
+def feed_plan(s: Scene, x0: float, speed: float, travel_steps: int, heap_toe: float) -> list[int]:
+    """Steps of the travel at which a fed pile is topped up: every :data:`FEED_EVERY`
+    of travel, from the step at which the feed zone (``s.feed_length`` ahead of the
+    roller axis, which starts at ``x0`` [m]) first covers the settled heap's toe
+    ``heap_toe`` [m], so the heap itself is counted before anything is added.
+    Empty without a feed."""
+    if s.feed_pile_mass is None:
+        return []
+    every = max(1, round(FEED_EVERY / (speed * s.timestep)))
+    first = max(0, ceil((heap_toe - s.feed_length - x0) / (speed * s.timestep)))
+    return list(range(first, travel_steps, every))
+
+
+def feed_zone(s: Scene, x_axis: float, floor: float) -> dict:
+    """The feed zone [m] when the roller axis is at ``x_axis``: a block from the axis
+    to ``s.feed_length`` ahead, from ``floor`` (above the substrate's highest point)
+    to the roller's height there, less a cylinder of the roller's radius plus the
+    largest particle's (nothing is inserted into the roller or the substrate)."""
+    r = s.roller_radius
+    top = s.roller_gap + r - sqrt(r**2 - s.feed_length**2)
+    return {"x0": x_axis, "x1": x_axis + s.feed_length, "z0": floor, "z1": top,
+            "axis_z": s.roller_gap + r, "radius": r + max(s.diameters) / 2}
+
+
+def travel_segments(travel_steps: int, checkpoints: list, feeds: list, resume_step: int = 0) -> list[dict]:
+    """The travel after ``resume_step`` cut at every checkpoint and feed step: a list of
+    ``{"end", "feed", "checkpoint"}`` in order; ``feed`` is true if the pile is topped up at
+    the segment's start, ``checkpoint`` the ``(step, previous)`` written at its end or None."""
+    at_end = {step: (step, previous) for step, previous in checkpoints}
+    feeds = [f for f in feeds if f >= resume_step]
+    cuts = sorted(set(at_end) | {f for f in feeds if f > resume_step} | {travel_steps})
+    segments, start = [], resume_step
+    for end in cuts:
+        segments.append({"start": start, "end": end, "feed": start in feeds, "checkpoint": at_end.get(end)})
+        start = end
+    return segments
+
+
 #: What a spreading run leaves out because its scene does not need it (README:
 #: skips): the wait for a fixed duration once the layer is at rest, the powder
 #: pushed past the stopped roller, and every dump but the final one. (Settling
@@ -376,7 +419,7 @@ BASELINE_DUMP_EVERY_S = 0.002
 
 
 def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: str | Path,
-           settled: str | Path, outdir: str | Path, movie_every: int = 0, skips=SKIPS) -> dict:
+           settled: str | Path, outdir: str | Path, movie_every: int = 0, skips=SKIPS, replicate: int = 0) -> dict:
     """Spread the settled heap at ``U_mm_s`` [mm/s] and ``omega_rad_s`` [rad/s].
 
     Writes ``spread.in``, ``spread.log``, ``final.dump`` and ``health.json``
@@ -388,6 +431,12 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     loads, e.g. after a cluster's time limit killed the job. Continuing the
     roller's motion from a restart is LIGGGHTS' own (``fix move/mesh`` stores
     it); a checkpoint that fails to load is skipped, and the run starts over.
+
+    With ``feed_pile_mg_per_mm`` in the fidelity level, the pile ahead of the
+    roller is topped up to that mass every :data:`FEED_EVERY` of travel
+    (:func:`feed_plan`, :func:`feed_zone`): the layer is laid from a pile of
+    a set size, however much the roller lays; ``fed_particles`` in the
+    health counts what was added. ``replicate`` seeds the feed.
     """
     s, out = scene(config, level), Path(outdir)
     meshes, settled = Path(meshes).resolve(), Path(settled).resolve()
@@ -407,6 +456,14 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     if not movie_every and "final_dump_only" not in skips:
         movie_every = max(1, round(BASELINE_DUMP_EVERY_S / s.timestep))
     motion = roller_motion(speed, omega_rad_s, s.roller_radius)
+    heap_toe = float((atoms0["x"] + atoms0["radius"]).max())
+    feeds = feed_plan(s, x0, speed, travel_steps, heap_toe)
+    feed = None
+    if feeds:
+        floor = float(geometry.load_stl(meshes / "substrate.stl").vertices[:, 2].max()) + max(s.diameters) / 2
+        feed_seeds = liggghts_seeds(config["random_seed"] + 1000 * replicate + 500, len(s.diameters) + 1 + len(feeds))
+        feed = {"mass": s.feed_pile_mass, "floor": floor, "template_seeds": feed_seeds[:len(s.diameters) + 1],
+                "seeds": dict(zip(feeds, feed_seeds[len(s.diameters) + 1:]))}
     context = dict(s=s, contact=contact_model(s), box=[f"{v:.6g}" for v in s.box], U_mm_s=U_mm_s,
                    omega_rad_s=omega_rad_s, motion=motion, restart=settled / "settled.restart", skin=skin(s),
                    binsize=binsize(s), thermo_every=THERMO_EVERY, processors=processors_grid(s),
@@ -420,9 +477,15 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     def render_from(step: int, restart: Path | None) -> str:
         """The input starting at ``step`` of the travel (0: from the settled heap)."""
         elapsed = step * s.timestep
+        segments = travel_segments(travel_steps, checkpoint_plan(travel_steps, s.checkpoints_per_run, step), feeds,
+                                   step)
+        for seg in segments:
+            if seg["feed"]:
+                seg["zone"] = feed_zone(s, x0 + speed * seg["start"] * s.timestep, feed["floor"])
+                seg["seed"] = feed["seeds"][seg["start"]]
         return render("spread.in.j2", resume=restart, resume_step=step, sfx="_resumed" if step else "",
                       roller_x=x0 + speed * elapsed, roller_angle_deg=np.degrees(abs(omega_rad_s) * elapsed) % 360,
-                      checkpoints=checkpoint_plan(travel_steps, s.checkpoints_per_run, step), **context)
+                      segments=segments, feed=feed, **context)
 
     fresh = render_from(0, None)
     fingerprint = hashlib.sha256(fresh.encode()).hexdigest()
@@ -449,8 +512,12 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                             "lower the time step or stiffen the particles")
     ahead = int(log["printed"]["particles_ahead_of_roller"])
     removed = ahead if "remove_ahead" in skips else 0
-    health.update(through_roller=inside, **layer_health(atoms, s, meshes / "substrate.stl", len(atoms0) - removed))
-    health.update(heap_supply(ahead, s.heap_particles), removed_ahead_of_roller=removed)
+    # particles fed before a resumed attempt are in its first thermo row
+    fed = int(log["thermo"]["Atoms"].iloc[0]) - len(atoms0) + int(log["inserted"])
+    health.update(through_roller=inside, fed_particles=fed,
+                  **layer_health(atoms, s, meshes / "substrate.stl", len(atoms0) + fed - removed))
+    health.update(heap_supply(ahead, s.heap_particles), removed_ahead_of_roller=removed,
+                  mass_ahead_of_roller_kg=float(log["printed"]["mass_ahead_of_roller_kg"]))
     thermo = log["thermo"]
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
     summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"], "cpu_s": log["cpu_s"],
@@ -477,18 +544,20 @@ def main(argv=None) -> int:
     parser.add_argument("--settled", type=Path)
     parser.add_argument("--U", type=float, help="spreader translation speed, mm/s")
     parser.add_argument("--omega", type=float, help="roller angular speed, rad/s (+: counter-rotation)")
+    parser.add_argument("--replicate", type=int, default=0, help="replicate: its heap, substrate and feed seeds")
     args = parser.parse_args(argv)
     try:
         config = load_config(args.config)
         level = args.level or config["level"]
         if args.step == "geometry":
-            result = make_geometry(config, level, args.out, base_dir=args.config.parent)
+            result = make_geometry(config, level, args.out, base_dir=args.config.parent, replicate=args.replicate)
         elif args.step == "settle":
-            result = settle(config, level, args.meshes, args.out)
+            result = settle(config, level, args.meshes, args.out, replicate=args.replicate)
         else:
             if args.U is None or args.omega is None:
                 parser.error("spread needs --U and --omega")
-            result = spread(config, level, args.U, args.omega, args.meshes, args.settled, args.out)
+            result = spread(config, level, args.U, args.omega, args.meshes, args.settled, args.out,
+                            replicate=args.replicate)
     except (ConfigError, LiggghtsError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2 if isinstance(err, ConfigError) else 1

@@ -11,13 +11,15 @@ Reads each level's finished runs (every run folder's ``metrics.json``, ``health.
 ``final.dump`` and its replicate's substrate) and writes to
 ``benchmarks/measured/``:
 
-- ``deposit_reference.csv``, ``.png``: the reference's deposit profiles (layer mass per
+- ``<name>_deposit.csv``, ``.png``: the reference's deposit profiles (layer mass per
   area along the travel) and, per point, where the layer reaches steady state
   (:func:`analysis.deposit.steady_state_start`, plateau: the region's far half);
-- ``deposit_pile.csv``, ``.png``: per bin past the heap's toe, the layer's areal mass against
-  the powder still ahead of the roller (mass balance): does the deposit depend on the pile?
-- ``<name>.csv``, ``.md``, ``.png``: one row per scene, each level measured over the
-  reference's steady region, and the reference re-measured over an earlier start or a shorter region (the layer behind the
+- ``<name>_pile.csv``, ``.png`` (unfed levels only): per bin past the heap's toe, the layer's
+  areal mass against the powder still ahead of the roller (mass balance): does the deposit
+  depend on the pile?
+- ``<name>.csv``, ``.md``, ``.png``: one row per scene, each level measured over its own
+  sampling region (as its map is made) and over the reference's steady region, and the
+  reference re-measured over an earlier start or a shorter region (the layer behind the
   roller does not depend on where the roller goes next, so these are measured on the
   reference's own dumps; their cost is scaled by their share of the travel): CPU time
   per run, and per metric the largest difference of point means from the reference's,
@@ -147,10 +149,13 @@ def main(argv=None) -> int:
     parser.add_argument("--levels", default="default", help="levels run at the reference points, comma-separated")
     parser.add_argument("--reference", default="reference")
     parser.add_argument("--name", default="scene_size")
+    parser.add_argument("--level-files", default="benchmarks/scene_size.yaml",
+                        help="YAML files (comma-separated) whose `fidelity` levels are added to config.yaml's")
     args = parser.parse_args(argv)
     started = time.perf_counter()
     config = load_config(ROOT / "config.yaml")
-    config["fidelity"].update(yaml.safe_load((ROOT / "benchmarks" / "scene_size.yaml").read_text())["fidelity"])
+    for path in filter(None, args.level_files.split(",")):
+        config["fidelity"].update(yaml.safe_load((ROOT / path).read_text())["fidelity"])
     out = ROOT / "benchmarks" / "measured"
     ref_scene = scene(config, args.reference)
     ref = level_runs(config, args.reference)
@@ -164,9 +169,10 @@ def main(argv=None) -> int:
     in_region = profiles[(profiles["x_mm"] > region_mm[0]) & (profiles["x_mm"] < region_mm[1])]  # rough substrate
     starts = {point: round(steady_state_start(group, plateau), 2)
               for point, group in in_region.groupby(["U_mm_s", "omega_rad_s"])}
-    profiles.to_csv(out / "deposit_reference.csv", index=False)
-    profile_figure(profiles, region_mm, f"Deposit profiles, level {args.reference} (band: 3 replicates)").savefig(
-        out / "deposit_reference.png", dpi=130)
+    profiles.to_csv(out / f"{args.name}_deposit.csv", index=False)
+    replicates = ref.groupby(["U_mm_s", "omega_rad_s"]).size().max()
+    profile_figure(profiles, region_mm, f"Deposit profiles, level {args.reference} (band: {replicates} replicates)"
+                   ).savefig(out / f"{args.name}_deposit.png", dpi=130)
 
     # The reference's own steady region: from the latest steady start to the region's end
     steady_from = max(starts.values())
@@ -181,11 +187,15 @@ def main(argv=None) -> int:
         runs = remeasure(config, args.reference, ref, (start, start + length))
         shorter = (travel - (region_mm[1] - start - length)) / travel
         rows.append(compare(f"{args.reference}, region {start:g}-{start + length:g} mm", runs, ref_means, sd, shorter))
-    for level in [lv for lv in args.levels.split(",") if lv]:  # over the reference's steady region
+    for level in [lv for lv in args.levels.split(",") if lv]:
         runs = level_runs(config, level)
-        end = min(region_mm[1], scene(config, level).sampling_region[1] * 1e3)
-        rows.append(compare(f"{level} (region {steady_from:g}-{end:g} mm)",
-                            remeasure(config, level, runs, (max(steady_from, region_mm[0]), end)), ref_means, sd))
+        own = tuple(round(v * 1e3, 6) for v in scene(config, level).sampling_region[:2])
+        # as it ships (its own region: what its map is made of), and over the reference's steady region
+        rows.append(compare(f"{level} (own region {own[0]:g}-{own[1]:g} mm)", runs, ref_means, sd))
+        end = min(region_mm[1], own[1])
+        if (max(steady_from, region_mm[0]), end) != own:
+            rows.append(compare(f"{level} (region {steady_from:g}-{end:g} mm)",
+                                remeasure(config, level, runs, (max(steady_from, region_mm[0]), end)), ref_means, sd))
     table = pd.DataFrame(rows)
     table.to_csv(out / f"{args.name}.csv", index=False)
     ref_mean = ref_means.abs().mean()
@@ -207,9 +217,11 @@ def main(argv=None) -> int:
     (out / f"{args.name}.md").write_text("\n".join(lines))
     print("\n".join(lines))
     plot(table, out / f"{args.name}.png")
-    pile = deposit_against_pile(config, [args.reference, *[lv for lv in args.levels.split(",") if lv]])
-    pile.to_csv(out / "deposit_pile.csv", index=False)
-    plot_pile(pile, out / "deposit_pile.png")
+    unfed = [lv for lv in [args.reference, *args.levels.split(",")] if lv and scene(config, lv).feed_pile_mass is None]
+    if unfed:  # a fed pile is topped up: the mass balance says nothing about it
+        pile = deposit_against_pile(config, unfed)
+        pile.to_csv(out / f"{args.name}_pile.csv", index=False)
+        plot_pile(pile, out / f"{args.name}_pile.png")
     return 0
 
 

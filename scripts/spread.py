@@ -9,4 +9,4 @@ from analysis.workflow import rule_context  # noqa: E402
 with rule_context(snakemake) as config:
     w = snakemake.wildcards
     spread(config, snakemake.params.level, float(w.U), float(w.omega), Path(snakemake.input.substrate).parent,
-           Path(snakemake.input.restart).parent, Path(snakemake.output.dump).parent)
+           Path(snakemake.input.restart).parent, Path(snakemake.output.dump).parent, replicate=int(w.rep))

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from analysis.config import (ConfigError, coerce_cli_values, liggghts_seeds, load_config, psd_classes,
-                             rayleigh_time, roller_motion, scene)
+from analysis.config import (ConfigError, coerce_cli_values, feed_length, liggghts_seeds, load_config,
+                             psd_classes, rayleigh_time, roller_motion, scene)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -55,6 +55,8 @@ def test_shipped_config_is_valid_and_has_the_papers_design(base):
     ("material.colour", "grey", "colour"),
     ("roller.diameter_mm", KeyError, "diameter_mm"),
     ("surrogate.n_test", 44, "surrogate.n_test"),
+    ("fidelity.default.feed_pile_mg_per_mm", 500, "feed_pile_mg_per_mm"),   # does not fit ahead of the roller
+    ("fidelity.default.feed_pile_mg_per_mm", -3, "feed_pile_mg_per_mm"),
 ])
 def test_bad_value_names_key_and_value(base, dotted, value, words):
     with pytest.raises(ConfigError) as err:
@@ -113,3 +115,19 @@ def test_roller_sign_convention_matches_the_paper(U, omega, bottom):
         assert (U * 1e-3 - wy * 0.015) * 1e3 == pytest.approx(bottom)
     else:
         assert m["rotate"] is None
+
+
+def test_feed_zone_holds_twice_the_pile_in_the_wedge_ahead_of_the_roller():
+    """The wedge between the bed and a roller of radius R at gap g, from the axis to L
+    ahead, has the area g L + R^2 asin(L/R)/2 - L sqrt(R^2 - L^2)/2 + ... (integral of
+    g + R - sqrt(R^2 - x^2)); the zone holds FEED_ZONE_ROOM x the pile's bulk volume."""
+    from math import asin, sqrt
+    from analysis.config import FEED_ZONE_ROOM, PILE_SOLID_FRACTION
+    R, g, rho = 0.015, 3e-4, 4430.0
+    for pile in (5e-3, 20e-3, 40e-3):                       # kg per m of width (mg/mm)
+        L = feed_length(pile, rho, R, g)
+        wedge = (g + R) * L - (L * sqrt(R**2 - L**2) + R**2 * asin(L / R)) / 2
+        assert wedge == pytest.approx(FEED_ZONE_ROOM * pile / (rho * PILE_SOLID_FRACTION), rel=1e-4)
+    assert feed_length(40e-3, rho, R, g) > feed_length(20e-3, rho, R, g)
+    with pytest.raises(ValueError, match="does not fit"):
+        feed_length(0.2, rho, R, g)

@@ -18,8 +18,8 @@ from analysis.config import load_config, scene  # noqa: E402
 from analysis.drop_test import drop_sphere, first_bounce, free_fall_time  # noqa: E402
 from analysis.dump import read_dump  # noqa: E402
 from analysis.run_liggghts import LiggghtsError, check_seeds, read_log, run  # noqa: E402
-from analysis.simulate import (checkpoint_plan, make_geometry, processors_grid, settle, spread,  # noqa: E402
-                               substrate_height)
+from analysis.simulate import (checkpoint_plan, feed_plan, make_geometry, processors_grid, settle,  # noqa: E402
+                               spread, substrate_height, travel_segments)
 
 from tests.test_config import ROOT  # noqa: E402
 
@@ -79,7 +79,8 @@ def test_spread_lays_powder_past_the_heap_and_loses_nothing(smoke):
     # the powder pushed past the stopped roller is counted, then removed (a skip)
     removed = smoke["spread"]["removed_ahead_of_roller"]
     assert removed == smoke["spread"]["particles_ahead_of_roller"] > 0
-    assert len(after) + removed == len(before) and smoke["spread"]["lost"] == 0
+    fed = smoke["spread"]["fed_particles"]
+    assert len(after) + removed == len(before) + fed and smoke["spread"]["lost"] == 0
     assert after.x.max() < s.travel_end + 2 * max(s.diameters)  # what sat under the roller may slump forward
     # nothing below the substrate: every centre at least half a radius above it
     b = substrate_height(root / "meshes" / "substrate.stl")(after.x, after.y)
@@ -87,6 +88,17 @@ def test_spread_lays_powder_past_the_heap_and_loses_nothing(smoke):
     # the spread layer is one to three particles thick
     layer = after[(after.x > x0) & (after.x < x1)]
     assert layer.z.max() < s.roller_gap + 0.1e-3
+
+
+def test_feed_holds_the_pile_ahead_of_the_roller(smoke):
+    """Forward rolling (omega = -5 rad/s at 100 mm/s) lays more than the smoke heap: the feed
+    tops the pile up, and when the roller stops the powder ahead of it weighs what the level's
+    feed_pile_mg_per_mm says (5 mg/mm x 1 mm), within the last top-up's dip and what the pile
+    pushed ahead of the feed zone."""
+    h, s = smoke["spread"], smoke["scene"]
+    assert h["fed_particles"] > 0.2 * s.heap_particles
+    assert h["mass_ahead_of_roller_kg"] == pytest.approx(s.feed_pile_mass, rel=0.25)
+    assert not h["heap_exhausted"]
 
 
 def test_time_step_is_the_configured_fraction_of_the_rayleigh_time(smoke, config):
@@ -184,7 +196,7 @@ def test_killed_spread_resumes_from_its_newest_checkpoint(smoke, config):
     resumed = spread(config, "smoke", U_MM_S, OMEGA, root / "meshes", root / "settle", out)
     assert resumed["resumed_from_step"] >= plan[1][0]
     # (chunked runs are not bit-identical: the powder ahead of the roller may differ by a particle)
-    whole = lambda h: h["atoms"] + h["removed_ahead_of_roller"]  # noqa: E731
+    whole = lambda h: h["atoms"] + h["removed_ahead_of_roller"] - h["fed_particles"]  # noqa: E731
     assert whole(resumed) == whole(smoke["spread"]) and resumed["lost"] == 0
     assert not (out / "checkpoint").exists()              # cleaned up after success
     full_end = root / "run" / f"roller_{travel_steps}.vtk"
@@ -199,6 +211,29 @@ def test_checkpoint_plan_spaces_checkpoints_and_skips_those_passed():
     assert checkpoint_plan(100, 3) == [(25, None), (50, 25), (75, 50)]
     assert checkpoint_plan(100, 3, resume_step=50) == [(75, 50)]
     assert checkpoint_plan(100, 3, resume_step=75) == []
+
+
+def test_travel_is_cut_at_checkpoints_and_feeds_and_resumes_after_them():
+    segs = travel_segments(100, [(25, None), (50, 25), (75, 50)], [10, 30, 50])
+    assert [(g["start"], g["end"]) for g in segs] == [(0, 10), (10, 25), (25, 30), (30, 50), (50, 75), (75, 100)]
+    assert [g["start"] for g in segs if g["feed"]] == [10, 30, 50]
+    assert [g["checkpoint"] for g in segs if g["checkpoint"]] == [(25, None), (50, 25), (75, 50)]
+    # resumed at the checkpoint of step 50: the feed due there is still made, nothing earlier
+    segs = travel_segments(100, [(75, 50)], [10, 30, 50], resume_step=50)
+    assert [(g["start"], g["end"], g["feed"]) for g in segs] == [(50, 75, True), (75, 100, False)]
+    assert travel_segments(100, [], []) == [{"start": 0, "end": 100, "feed": False, "checkpoint": None}]
+
+
+def test_feed_starts_once_its_zone_covers_the_heap_and_repeats_every_half_mm(config):
+    from dataclasses import replace
+    s = replace(scene(config, "default"), feed_pile_mass=1e-5, feed_length=8e-3)
+    speed = 0.1                                      # m/s
+    every = round(0.5e-3 / (speed * s.timestep))     # steps per 0.5 mm of travel
+    plan = feed_plan(s, x0=-0.01, speed=speed, travel_steps=40 * every, heap_toe=0.003)
+    first = plan[0]                                   # the zone's front (axis + 8 mm) reaches the toe at 3 mm
+    assert -0.01 + 8e-3 + speed * s.timestep * first == pytest.approx(0.003, abs=speed * s.timestep)
+    assert np.all(np.diff(plan) == every) and plan[-1] < 40 * every
+    assert feed_plan(scene(config, "default"), -0.01, speed, 1000, 0.003) == []   # no feed configured
 
 
 def test_processors_grid_cuts_a_strip_across_its_width(config):

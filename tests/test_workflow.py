@@ -18,7 +18,7 @@ from tests.test_config import ROOT
 
 pytestmark = pytest.mark.xdist_group("workflow")
 
-OMEGAS = [0, 5, 10]  # forward rolling (omega < 0) uses up the smoke heap: supply-limited
+OMEGAS = [-10, 0, 5]  # the fed smoke pile lasts under forward rolling too
 FIRST_U = [85, 100]
 #: 4 x the smoke scene's seed-to-seed standard deviation at U = 100 mm/s, omega = 0
 #: (4 heap packings, benchmarks/measured/noise_smoke.csv), in the dataset's units
@@ -52,15 +52,17 @@ def test_dataset_has_one_sane_row_per_run(workflow):
     # eq. 5: Q_s = U thk_avg
     assert np.allclose(data.throughput_mm2_s, data.U_mm_s * data.thickness_um * 1e-3)
     assert np.all(data.wall_s > 0) and np.all(data.steps > 0)
-    # the smoke scene's heap lasts at the points the tests use; LIGGGHTS' own CPU time is the cost
-    assert not data.heap_exhausted.any() and np.all((data.supply_margin > 0) & (data.supply_margin < 1))
+    # the smoke scene's fed pile lasts at the points the tests use (about its 5 mg is left at the
+    # end: the heap's own 400 particles weigh 5.3 mg); LIGGGHTS' own CPU time is the cost
+    assert not data.heap_exhausted.any() and np.all(data.supply_margin > 0.5)
+    assert np.all(data.fed_particles[data.omega_rad_s < 0] > data.fed_particles[data.omega_rad_s > 0].max())
     assert np.all((data.cpu_s > 0) & (data.cpu_s <= 1.05 * data.wall_s))  # one rank: CPU within the wall time
 
 
 def test_deposit_profile_shows_the_layer_along_the_travel(workflow):
     out = workflow / "results/smoke"
     profiles = pd.read_csv(out / "deposit_profile.csv")
-    assert sorted(set(zip(profiles.U_mm_s, profiles.omega_rad_s))) == [(100, 0), (100, 10)]  # middle U of [85, 100]
+    assert sorted(set(zip(profiles.U_mm_s, profiles.omega_rad_s))) == [(100, -10), (100, 0), (100, 5)]  # middle U
     in_region = profiles[(profiles.x_mm > 4.5) & (profiles.x_mm < 6.5)]
     # mass per area in the region: the dataset's M_s over the region's 2 x 1 mm
     data = pd.read_csv(out / "dataset.csv").set_index(["U_mm_s", "omega_rad_s"])
@@ -71,12 +73,12 @@ def test_deposit_profile_shows_the_layer_along_the_travel(workflow):
 
 
 def test_a_heap_that_runs_dry_is_refused_by_name_unless_kept(tmp_path):
-    """A smoke scene with a 60-particle heap runs dry at omega = -10 rad/s: the dataset rule
+    """A smoke scene with a 60-particle heap and no feed runs dry at omega = -10 rad/s: the dataset rule
     refuses it naming the key to raise; keep_supply_limited_runs keeps and marks it."""
     base = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-d", str(tmp_path),
             "--configfile", str(ROOT / "config.yaml"), "--cores", "2", "results/smoke/dataset.csv", "--config",
             "level=smoke", 'sweep={"U_mm_s": [100], "omega_rad_s": [-10, 0, 5, 10], "replicates": 1}',
-            'surrogate={"n_test": 1}', 'fidelity={"smoke": {"heap_particles": 60}}']
+            'surrogate={"n_test": 1}', 'fidelity={"smoke": {"heap_particles": 60, "feed_pile_mg_per_mm": null}}']
     proc = subprocess.run([*base, "keep_supply_limited_runs=false"], capture_output=True, text=True)
     assert proc.returncode != 0
     assert "raise fidelity.smoke.heap_particles" in proc.stderr
@@ -100,7 +102,7 @@ def test_surrogate_scores_maps_and_grid_are_made(workflow):
         assert (out / "maps" / f"{name}.png").stat().st_size > 5000
         assert (out / "maps" / f"{name}.svg").exists()
     # Figure 4's top views: fastest U, the swept omegas nearest -5, 0 and +5 rad/s
-    assert {p.stem for p in out.glob("top_views/*.png")} == {"U100_w0_r0", "U100_w5_r0"}
+    assert {p.stem for p in out.glob("top_views/*.png")} == {"U100_w-10_r0", "U100_w0_r0", "U100_w5_r0"}
     assert len(list(out.glob("runs/*/final.vtp"))) == len(FIRST_U) * len(OMEGAS)
     assert len(list((workflow / "results/benchmarks/smoke/spread").glob("*.tsv"))) == 6
 
