@@ -1,14 +1,14 @@
 """Pile size: how the layer laid under forward rolling depends on the fed pile.
 
-Usage (after the default level's reference-study runs, benchmarks/README.md)::
+Usage (after the fed_default level's reference-study runs, benchmarks/README.md)::
 
     .venv/bin/python benchmarks/bench_pile_size.py [--U 70 --omega -15 --replicates 3 --jobs 2]
 
-Spreads the default scene with each level of ``benchmarks/pile_size.yaml`` (the same scene,
-another ``feed_pile_mg_per_mm``) from the default's settled heaps and substrates
-(``results/default/settle/r<k>``, ``meshes/r<k>``), so replicate k differs from the
-default's replicate k by the pile alone. Writes ``results/<level>/runs/`` and
-``benchmarks/measured/pile_size.csv`` (one row per run, the default's runs included) and
+Spreads the ``fed_default`` scene (benchmarks/scene_size.yaml) with each level of
+``benchmarks/pile_size.yaml`` (the same scene, another ``feed_pile_mg_per_mm``) from its
+settled heaps and substrates (``results/fed_default/settle/r<k>``, ``meshes/r<k>``), so
+replicate k differs from its replicate k by the pile alone. Writes ``results/<level>/runs/``
+and ``benchmarks/measured/pile_size.csv`` (one row per run, fed_default's included) and
 ``pile_size.md`` (mean and seed-to-seed sd per pile, cost).
 """
 from __future__ import annotations
@@ -31,12 +31,15 @@ from analysis.dump import read_dump  # noqa: E402
 from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
 from analysis.simulate import spread  # noqa: E402
 
+#: The scene whose settled heaps and substrates every pile spreads from (benchmarks/scene_size.yaml).
+BASE_LEVEL = "fed_default"
 METRICS = ["mass_mg_mm2", "throughput_mm2_s", "roughness_um", "porosity_pct", "thickness_um"]
 
 
 def config_with_levels() -> dict:
     config = load_config(ROOT / "config.yaml")
-    config["fidelity"].update(yaml.safe_load((ROOT / "benchmarks" / "pile_size.yaml").read_text())["fidelity"])
+    for name in ("scene_size.yaml", "pile_size.yaml"):
+        config["fidelity"].update(yaml.safe_load((ROOT / "benchmarks" / name).read_text())["fidelity"])
     return config
 
 
@@ -44,7 +47,7 @@ def one_run(level: str, U: float, omega: float, replicate: int) -> dict:
     """Spread (unless already done) and measure one run; returns its row."""
     config = config_with_levels()
     s = scene(config, level)
-    base = ROOT / "results" / "default"
+    base = ROOT / "results" / BASE_LEVEL
     out = ROOT / "results" / level / "runs" / run_name(U, omega, replicate)
     meshes = base / "meshes" / f"r{replicate}"
     if not (out / "health.json").is_file():
@@ -67,7 +70,7 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="runs at once")
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    levels = ["default", *yaml.safe_load((ROOT / "benchmarks" / "pile_size.yaml").read_text())["fidelity"]]
+    levels = [BASE_LEVEL, *yaml.safe_load((ROOT / "benchmarks" / "pile_size.yaml").read_text())["fidelity"]]
     jobs = [(lv, args.U, args.omega, k) for lv in levels for k in range(args.replicates)]
     with ProcessPoolExecutor(args.jobs) as pool:
         rows = list(pool.map(one_run, *zip(*jobs)))
@@ -80,8 +83,8 @@ def main(argv=None) -> int:
              f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, in "
              f"{time.perf_counter() - started:.0f} s ({args.jobs} runs at once), by "
              f"`.venv/bin/python benchmarks/bench_pile_size.py {' '.join(argv if argv is not None else sys.argv[1:])}`.",
-             "", f"The default scene at U = {args.U:g} mm/s, omega = {args.omega:g} rad/s, {args.replicates} replicates "
-             "(the default's heap packings and substrates) per pile; mean and seed-to-seed sd; cost in LIGGGHTS CPU "
+             "", f"The fed_default scene at U = {args.U:g} mm/s, omega = {args.omega:g} rad/s, {args.replicates} replicates "
+             "(its heap packings and substrates) per pile; mean and seed-to-seed sd; cost in LIGGGHTS CPU "
              "seconds per run. M_s per area in mg/mm^2, Q_s mm^2/s, R_q and thickness um, Phi %.", "",
              summary.reset_index().to_markdown(index=False, floatfmt=".3g"), ""]
     (out / "pile_size.md").write_text("\n".join(lines))

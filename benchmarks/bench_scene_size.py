@@ -149,6 +149,10 @@ def main(argv=None) -> int:
     parser.add_argument("--levels", default="default", help="levels run at the reference points, comma-separated")
     parser.add_argument("--reference", default="reference")
     parser.add_argument("--name", default="scene_size")
+    parser.add_argument("--ref-region", help="the reference's steady region FROM-TO (mm) instead of the one the "
+                        "deposit profiles give, e.g. to leave out the layer under the stopped roller")
+    parser.add_argument("--level-regions", default="",
+                        help="extra rows: LEVEL:FROM-TO (mm), comma-separated, a level re-measured over that region")
     parser.add_argument("--level-files", default="benchmarks/scene_size.yaml",
                         help="YAML files (comma-separated) whose `fidelity` levels are added to config.yaml's")
     args = parser.parse_args(argv)
@@ -176,14 +180,19 @@ def main(argv=None) -> int:
 
     # The reference's own steady region: from the latest steady start to the region's end
     steady_from = max(starts.values())
+    if args.ref_region:
+        steady_from, ref_end = (float(v) for v in args.ref_region.split("-"))
+        region_mm = (region_mm[0], ref_end)
     ref_steady = remeasure(config, args.reference, ref, (max(steady_from, region_mm[0]), region_mm[1]))
     sd = pooled_sd(ref_steady)
     ref_means = ref_steady.groupby(["U_mm_s", "omega_rad_s"])[list(METRICS)].mean()
     travel = ref["roller_travel_m"].mean() * 1e3
     rows = [compare(f"{args.reference} (region {steady_from:g}-{region_mm[1]:g} mm)", ref_steady, ref_means, sd)]
+    seen = {(steady_from, region_mm[1])}
     for start, length in ((steady_from, 4.0), (region_mm[0], 4.0), (steady_from, 2.0)):
-        if start + length > region_mm[1] + 1e-9:
+        if start + length > region_mm[1] + 1e-9 or (start, start + length) in seen:
             continue
+        seen.add((start, start + length))
         runs = remeasure(config, args.reference, ref, (start, start + length))
         shorter = (travel - (region_mm[1] - start - length)) / travel
         rows.append(compare(f"{args.reference}, region {start:g}-{start + length:g} mm", runs, ref_means, sd, shorter))
@@ -196,6 +205,11 @@ def main(argv=None) -> int:
         if (max(steady_from, region_mm[0]), end) != own:
             rows.append(compare(f"{level} (region {steady_from:g}-{end:g} mm)",
                                 remeasure(config, level, runs, (max(steady_from, region_mm[0]), end)), ref_means, sd))
+    for item in filter(None, args.level_regions.split(",")):
+        level, span = item.split(":")
+        a, b = (float(v) for v in span.split("-"))
+        rows.append(compare(f"{level} (region {a:g}-{b:g} mm)", remeasure(config, level, level_runs(config, level),
+                                                                            (a, b)), ref_means, sd))
     table = pd.DataFrame(rows)
     table.to_csv(out / f"{args.name}.csv", index=False)
     ref_mean = ref_means.abs().mean()
