@@ -18,7 +18,7 @@ import json
 import os
 import shutil
 import sys
-from math import ceil, sqrt
+from math import ceil, pi, sqrt
 from pathlib import Path
 
 import numpy as np
@@ -40,10 +40,14 @@ BELOW_SUBSTRATE_RADII = 0.5
 #: harder (20 % seen at U = 40 mm/s); past 50 % spheres pass through each other.
 MAX_OVERLAP = 0.05
 MAX_OVERLAP_ANYWHERE = 0.5
-#: A run "blows up" when any particle moves faster than this many times the
-#: fastest wall (U + |omega| R), and at least BLOWUP_FLOOR_M_S (a fall from
-#: the top of the box is under 1 m/s; particles squeezed out under the roller
-#: reach 0.9 m/s in sound runs, 34 m/s in unstable ones: benchmarks/measured/stress.md).
+#: A run "blows up" when any particle moves faster than the fastest speed a
+#: sound run can give it: at least BLOWUP_FLOOR_M_S (a fall from the top of the
+#: box is under 1 m/s), BLOWUP_SPEED_FACTOR times the fastest wall (U + |omega| R),
+#: and the speed a particle squeezed against a wall to the largest tolerated
+#: overlap (MAX_OVERLAP_ANYWHERE) gets back when the stored Hertz energy is
+#: released (squeeze_out_speed: 5.4 m/s at E = 5 MPa; a fed pile squeezes
+#: particles out of the roller's nip at 1-2.5 m/s in sound runs, unstable time
+#: steps reach 12-34 m/s: benchmarks/measured/stress.md, docs/scene_size.md).
 #: Checked on the thermo output during the run (every THERMO_EVERY steps), not
 #: only on the final state.
 BLOWUP_SPEED_FACTOR = 10
@@ -211,12 +215,28 @@ def layer_health(atoms, s: Scene, substrate_stl, expected_atoms: int) -> dict:
     return health
 
 
-def check_kinetic_energy(log: dict, wall_speed: float = 0.0) -> dict:
+def squeeze_out_speed(density: float, youngs_modulus: float, poisson_ratio: float,
+                      overlap_fraction: float = MAX_OVERLAP_ANYWHERE) -> float:
+    """Speed [m/s] a sphere gets when the Hertz energy of an overlap of
+    ``overlap_fraction`` of its radius against a wall of its own material is
+    released into its translation.
+
+    ``W = 8/15 E* sqrt(r) d^(5/2)`` with ``d = f r`` and ``E* = E / (2 (1 - nu^2))``,
+    over ``m = 4/3 pi rho r^3``: ``v = sqrt(4 E* f^(5/2) / (5 pi rho))``, the same for
+    every radius. SI units.
+    """
+    effective_modulus = youngs_modulus / (2.0 * (1.0 - poisson_ratio**2))
+    return sqrt(4.0 * effective_modulus * overlap_fraction**2.5 / (5.0 * pi * density))
+
+
+def check_kinetic_energy(log: dict, wall_speed: float = 0.0, squeeze_speed: float = 0.0) -> dict:
     """Refuse a run whose thermo output shows a non-finite kinetic energy or a
-    particle faster than the blow-up limit; ``wall_speed`` [m/s] is the fastest
-    wall (roller surface). Returns the peak particle speed [m/s]."""
+    particle faster than the blow-up limit: the largest of BLOWUP_FLOOR_M_S,
+    BLOWUP_SPEED_FACTOR x ``wall_speed`` [m/s] (the fastest wall, the roller's
+    surface) and ``squeeze_speed`` [m/s] (``squeeze_out_speed``). Returns the
+    peak particle speed [m/s]."""
     thermo = log["thermo"]
-    limit = max(BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR * wall_speed)
+    limit = max(BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR * wall_speed, squeeze_speed)
     energy, vmax = thermo["KinEng"].to_numpy(), thermo["vmax"].to_numpy()
     bad = ~np.isfinite(energy) | ~np.isfinite(vmax)
     if bad.any():
@@ -226,7 +246,8 @@ def check_kinetic_energy(log: dict, wall_speed: float = 0.0) -> dict:
         first = np.argmax(fast)
         raise LiggghtsError(f"unsound run: kinetic-energy blow-up, a particle at {vmax[first]:.3g} m/s at step "
                             f"{int(thermo['Step'].iloc[first])} (limit {limit:.3g} m/s = max({BLOWUP_FLOOR_M_S:g}, "
-                            f"{BLOWUP_SPEED_FACTOR} x the fastest wall's {wall_speed:.3g} m/s)): lower the time step")
+                            f"{BLOWUP_SPEED_FACTOR} x the fastest wall's {wall_speed:.3g} m/s, squeeze-out "
+                            f"{squeeze_speed:.3g} m/s)): lower the time step")
     return {"peak_speed_m_s": float(vmax.max(initial=0.0))}
 
 
@@ -289,7 +310,7 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     (out / "settle.in").write_text(text)
     log = run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks)
     _check_timestep(log, s)
-    peak = check_kinetic_energy(log)
+    peak = check_kinetic_energy(log, squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
     if log["inserted"] != s.heap_particles:
         raise LiggghtsError(f"inserted {log['inserted']} of {s.heap_particles} particles: the heap region is too "
                             "small for heap_particles (see fidelity level)")
@@ -504,7 +525,8 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
             print(f"warning: resuming from {restart} failed, trying an older checkpoint or a fresh start:\n{err}",
                   file=sys.stderr)
     _check_timestep(log, s)
-    health = check_kinetic_energy(log, wall_speed=speed + abs(omega_rad_s) * s.roller_radius)
+    health = check_kinetic_energy(log, wall_speed=speed + abs(omega_rad_s) * s.roller_radius,
+                                  squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
     atoms = read_dump(out / "final.dump.part").atoms
     inside = through_roller(atoms, x0 + speed * travel_steps * s.timestep, context["roller_z"], s.roller_radius)
     if inside:

@@ -233,7 +233,7 @@ def test_feed_starts_once_its_zone_covers_the_heap_and_repeats_every_half_mm(con
     first = plan[0]                                   # the zone's front (axis + 8 mm) reaches the toe at 3 mm
     assert -0.01 + 8e-3 + speed * s.timestep * first == pytest.approx(0.003, abs=speed * s.timestep)
     assert np.all(np.diff(plan) == every) and plan[-1] < 40 * every
-    assert feed_plan(scene(config, "default"), -0.01, speed, 1000, 0.003) == []   # no feed configured
+    assert feed_plan(replace(s, feed_pile_mass=None), -0.01, speed, 1000, 0.003) == []   # no feed configured
 
 
 def test_processors_grid_cuts_a_strip_across_its_width(config):

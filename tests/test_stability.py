@@ -12,7 +12,7 @@ import pytest
 from analysis.dataset import SupplyLimitedError, UnsoundRunError, check_run
 from analysis.run_liggghts import LiggghtsError
 from analysis.simulate import (BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR, check_kinetic_energy, make_geometry,
-                               settle, through_roller)
+                               settle, squeeze_out_speed, through_roller)
 
 pytestmark = pytest.mark.xdist_group("liggghts_smoke")
 
@@ -33,6 +33,21 @@ def test_kinetic_energy_blow_up_is_refused_naming_speed_step_and_limit():
     check_kinetic_energy(thermo([0.1, 3.9]), wall_speed=wall)
     with pytest.raises(LiggghtsError, match=r"blow-up, a particle at 4\.1 m/s at step 2000 \(limit 4 m/s"):
         check_kinetic_energy(thermo([0.1, 0.2, 4.1, 80.0]), wall_speed=wall)
+
+
+def test_squeeze_out_speed_is_the_released_hertz_energy():
+    # integrate the Hertz sphere-wall force 4/3 E* sqrt(r) d^1.5 up to d = r/2 for a 50 um sphere
+    rho, E, nu, r = 4430.0, 5e6, 0.34, 50e-6
+    e_star = E / (2 * (1 - nu**2))
+    d = np.linspace(0.0, 0.5 * r, 20001)
+    work = np.trapezoid(4 / 3 * e_star * np.sqrt(r) * d**1.5, d)
+    v = np.sqrt(2 * work / (rho * 4 / 3 * np.pi * r**3))
+    assert squeeze_out_speed(rho, E, nu, 0.5) == pytest.approx(v, rel=1e-6)
+    assert v == pytest.approx(5.36, abs=0.01)
+    # independent of size, and the limit at the default's stiffness lets a 2.5 m/s squeeze-out pass
+    check_kinetic_energy(thermo([0.3, 2.5, 0.5]), wall_speed=0.22, squeeze_speed=v)
+    with pytest.raises(LiggghtsError, match=r"a particle at 12 m/s .*squeeze-out 5\.36 m/s"):
+        check_kinetic_energy(thermo([0.3, 12.0]), wall_speed=0.22, squeeze_speed=v)
 
 
 def test_non_finite_kinetic_energy_is_refused():
