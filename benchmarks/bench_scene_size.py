@@ -91,15 +91,31 @@ def pooled_sd(runs: pd.DataFrame) -> pd.Series:
     return np.sqrt((groups.var(ddof=1) * dof).sum() / dof.sum())
 
 
-def compare(name: str, runs: pd.DataFrame, ref_means: pd.DataFrame, sd: pd.Series, cpu_scale: float = 1.0) -> dict:
-    """One row: cost, and the largest |point mean - reference mean| / pooled sd per metric."""
-    means = runs.groupby(["U_mm_s", "omega_rad_s"])[list(METRICS)].mean()
+def compare(name: str, runs: pd.DataFrame, ref_runs: pd.DataFrame, sd: pd.Series, cpu_scale: float = 1.0) -> dict:
+    """One row: cost, and the largest |point mean - reference mean| per metric, in units of
+    the reference's pooled seed-to-seed sd (``max_diff_sd_*``: ``converged`` below
+    TOLERANCE_SD) and of the two scenes' pooled sd (``max_diff_pooled_sd_*``: both
+    scenes' replicates pooled over the points, the usual effect size; ``within_pooled``)."""
+    cols = list(METRICS)
+    means = runs.groupby(["U_mm_s", "omega_rad_s"])[cols].mean()
+    ref_means = ref_runs.groupby(["U_mm_s", "omega_rad_s"])[cols].mean()
     common = means.index.intersection(ref_means.index)  # points both have run
-    gap = ((means.loc[common] - ref_means.loc[common]).abs() / sd).max()
+    diff = (means.loc[common] - ref_means.loc[common]).abs()
+    gap = (diff / sd).max()
+    both = pd.concat([runs.assign(scene="level"), ref_runs.assign(scene="ref")])
+    both = both[both.set_index(["U_mm_s", "omega_rad_s"]).index.isin(common)]
+    groups = both.groupby(["scene", "U_mm_s", "omega_rad_s"])[cols]
+    dof = groups.count() - 1
+    pooled = np.sqrt((groups.var(ddof=1).fillna(0) * dof).sum() / dof.sum())
+    gap2 = (diff / pooled).max()
     row = {"scene": name, "points": len(common), "runs": len(runs), "cpu_s_per_run": runs["cpu_s"].mean() * cpu_scale,
            "min_supply_margin": runs["supply_margin"].min() if "supply_margin" in runs else np.nan}
     row.update({f"max_diff_sd_{label}": gap[m] for m, label in METRICS.items()})
     row["converged"] = bool((gap < TOLERANCE_SD).all())
+    row.update({f"max_diff_pooled_sd_{label}": gap2[m] for m, label in METRICS.items()})
+    row["within_pooled"] = bool((gap2 < TOLERANCE_SD).all())
+    own = pooled_sd(runs) / runs[cols].mean().abs()
+    row.update({f"seed_sd_pct_{label}": 100 * own[m] for m, label in METRICS.items()})
     return row
 
 
@@ -187,7 +203,7 @@ def main(argv=None) -> int:
     sd = pooled_sd(ref_steady)
     ref_means = ref_steady.groupby(["U_mm_s", "omega_rad_s"])[list(METRICS)].mean()
     travel = ref["roller_travel_m"].mean() * 1e3
-    rows = [compare(f"{args.reference} (region {steady_from:g}-{region_mm[1]:g} mm)", ref_steady, ref_means, sd)]
+    rows = [compare(f"{args.reference} (region {steady_from:g}-{region_mm[1]:g} mm)", ref_steady, ref_steady, sd)]
     seen = {(steady_from, region_mm[1])}
     for start, length in ((steady_from, 4.0), (region_mm[0], 4.0), (steady_from, 2.0)):
         if start + length > region_mm[1] + 1e-9 or (start, start + length) in seen:
@@ -195,21 +211,21 @@ def main(argv=None) -> int:
         seen.add((start, start + length))
         runs = remeasure(config, args.reference, ref, (start, start + length))
         shorter = (travel - (region_mm[1] - start - length)) / travel
-        rows.append(compare(f"{args.reference}, region {start:g}-{start + length:g} mm", runs, ref_means, sd, shorter))
+        rows.append(compare(f"{args.reference}, region {start:g}-{start + length:g} mm", runs, ref_steady, sd, shorter))
     for level in [lv for lv in args.levels.split(",") if lv]:
         runs = level_runs(config, level)
         own = tuple(round(v * 1e3, 6) for v in scene(config, level).sampling_region[:2])
         # as it ships (its own region: what its map is made of), and over the reference's steady region
-        rows.append(compare(f"{level} (own region {own[0]:g}-{own[1]:g} mm)", runs, ref_means, sd))
+        rows.append(compare(f"{level} (own region {own[0]:g}-{own[1]:g} mm)", runs, ref_steady, sd))
         end = min(region_mm[1], own[1])
         if (max(steady_from, region_mm[0]), end) != own:
             rows.append(compare(f"{level} (region {steady_from:g}-{end:g} mm)",
-                                remeasure(config, level, runs, (max(steady_from, region_mm[0]), end)), ref_means, sd))
+                                remeasure(config, level, runs, (max(steady_from, region_mm[0]), end)), ref_steady, sd))
     for item in filter(None, args.level_regions.split(",")):
         level, span = item.split(":")
         a, b = (float(v) for v in span.split("-"))
         rows.append(compare(f"{level} (region {a:g}-{b:g} mm)", remeasure(config, level, level_runs(config, level),
-                                                                            (a, b)), ref_means, sd))
+                                                                            (a, b)), ref_steady, sd))
     table = pd.DataFrame(rows)
     table.to_csv(out / f"{args.name}.csv", index=False)
     ref_mean = ref_means.abs().mean()
@@ -227,7 +243,13 @@ def main(argv=None) -> int:
              f"converged below {TOLERANCE_SD:g} for every metric. The reference's pooled seed-to-seed sd "
              f"(noise floor; M_s/area in mg/mm^2, Q_s mm^2/s, R_q um, Phi %): {floor}. Cost: LIGGGHTS' CPU seconds per spreading run "
              "(re-measured regions: the reference's cost scaled by their share of the travel).", "",
-             table.to_markdown(index=False, floatfmt=".3g"), ""]
+             table[[c for c in table if not c.startswith(("max_diff_pooled", "within", "seed_sd"))]].to_markdown(
+                 index=False, floatfmt=".3g"), "",
+             "The same differences in units of the two scenes' pooled seed-to-seed sd (both scenes' replicates, "
+             f"pooled over the points: the usual effect size; within below {TOLERANCE_SD:g}), and each scene's own "
+             "pooled seed-to-seed sd in % of its mean:", "",
+             table[["scene"] + [c for c in table if c.startswith(("max_diff_pooled", "within", "seed_sd"))]].to_markdown(
+                 index=False, floatfmt=".3g"), ""]
     (out / f"{args.name}.md").write_text("\n".join(lines))
     print("\n".join(lines))
     plot(table, out / f"{args.name}.png")
