@@ -45,9 +45,10 @@ MAX_OVERLAP_ANYWHERE = 0.5
 #: box is under 1 m/s), BLOWUP_SPEED_FACTOR times the fastest wall (U + |omega| R),
 #: and the speed a particle squeezed against a wall to the largest tolerated
 #: overlap (MAX_OVERLAP_ANYWHERE) gets back when the stored Hertz energy is
-#: released (squeeze_out_speed: 5.4 m/s at E = 5 MPa; a fed pile squeezes
-#: particles out of the roller's nip at 1-2.5 m/s in sound runs, unstable time
-#: steps reach 12-34 m/s: benchmarks/measured/stress.md, docs/scene_size.md).
+#: released (squeeze_out_speed: 5.4 m/s at E = 5 MPa). Sound runs stay under
+#: 1 m/s; a time step near the stable limit throws single particles out of the
+#: roller's nip at several m/s (1.3-6.7 m/s at 0.4 T_R with a fed pile) and
+#: unstable ones reach 12-34 m/s (benchmarks/measured/stress.md, docs/scene_size.md).
 #: Checked on the thermo output during the run (every THERMO_EVERY steps), not
 #: only on the final state.
 BLOWUP_SPEED_FACTOR = 10
