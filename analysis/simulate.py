@@ -47,7 +47,7 @@ MAX_OVERLAP_ANYWHERE = 0.5
 #: overlap (MAX_OVERLAP_ANYWHERE) gets back when the stored Hertz energy is
 #: released (squeeze_out_speed: 5.4 m/s at E = 5 MPa). Sound runs stay under
 #: 1 m/s; a time step near the stable limit throws single particles out of the
-#: roller's nip at several m/s (1.3-6.7 m/s at 0.4 T_R with a fed pile) and
+#: roller's nip at several m/s (1.25-6.7 m/s at 0.4 T_R with a fed pile) and
 #: unstable ones reach 12-34 m/s (benchmarks/measured/stress.md, docs/scene_size.md).
 #: Checked on the thermo output during the run (every THERMO_EVERY steps), not
 #: only on the final state.
@@ -534,7 +534,8 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
         raise LiggghtsError(f"unsound run: {inside} particles passed through the roller (centre inside it): "
                             "lower the time step or stiffen the particles")
     ahead = int(log["printed"]["particles_ahead_of_roller"])
-    removed = ahead if "remove_ahead" in skips else 0
+    # the powder ahead of the stopped roller, and what rolled on under it during the rest phase
+    removed = ahead + int(log["printed"]["escaped_past_roller"]) if "remove_ahead" in skips else 0
     # particles fed before a resumed attempt are in its first thermo row
     fed = int(log["thermo"]["Atoms"].iloc[0]) - len(atoms0) + int(log["inserted"])
     health.update(through_roller=inside, fed_particles=fed,
