@@ -45,10 +45,10 @@ MAX_OVERLAP_ANYWHERE = 0.5
 #: box is under 1 m/s), BLOWUP_SPEED_FACTOR times the fastest wall (U + |omega| R),
 #: and the speed a particle squeezed against a wall to the largest tolerated
 #: overlap (MAX_OVERLAP_ANYWHERE) gets back when the stored Hertz energy is
-#: released (squeeze_out_speed: 5.4 m/s at E = 5 MPa). Sound runs stay under
-#: 1 m/s; a time step near the stable limit throws single particles out of the
-#: roller's nip at several m/s (1.25-6.7 m/s at 0.4 T_R with a fed pile) and
-#: unstable ones reach 12-34 m/s (benchmarks/measured/stress.md, docs/scene_size.md).
+#: released (squeeze_out_speed: 5.4 m/s at E = 5 MPa). With a fed pile, sound
+#: runs squeeze single particles out of the roller's nip at up to 2.6 m/s; one
+#: at 0.4 T_R reached 6.65 m/s (under 1 m/s at 0.35 and 0.3 T_R), and unstable
+#: time steps reach 12-34 m/s (benchmarks/measured/stress.md, docs/scene_size.md).
 #: Checked on the thermo output during the run (every THERMO_EVERY steps), not
 #: only on the final state.
 BLOWUP_SPEED_FACTOR = 10
