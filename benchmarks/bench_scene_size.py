@@ -84,11 +84,11 @@ def remeasure(config: dict, level: str, runs: pd.DataFrame, region_mm: tuple) ->
     return pd.DataFrame(rows)
 
 
-def pooled_sd(runs: pd.DataFrame) -> pd.Series:
-    """Pooled seed-to-seed standard deviation of each metric over the points."""
-    groups = runs.groupby(["U_mm_s", "omega_rad_s"])[list(METRICS)]
+def pooled_sd(runs: pd.DataFrame, by=("U_mm_s", "omega_rad_s")) -> pd.Series:
+    """Pooled seed-to-seed standard deviation of each metric over the groups ``by`` (the points)."""
+    groups = runs.groupby(list(by))[list(METRICS)]
     dof = groups.count() - 1
-    return np.sqrt((groups.var(ddof=1) * dof).sum() / dof.sum())
+    return np.sqrt((groups.var(ddof=1).fillna(0) * dof).sum() / dof.sum())
 
 
 def compare(name: str, runs: pd.DataFrame, ref_runs: pd.DataFrame, sd: pd.Series, cpu_scale: float = 1.0) -> dict:
@@ -104,10 +104,7 @@ def compare(name: str, runs: pd.DataFrame, ref_runs: pd.DataFrame, sd: pd.Series
     gap = (diff / sd).max()
     both = pd.concat([runs.assign(scene="level"), ref_runs.assign(scene="ref")])
     both = both[both.set_index(["U_mm_s", "omega_rad_s"]).index.isin(common)]
-    groups = both.groupby(["scene", "U_mm_s", "omega_rad_s"])[cols]
-    dof = groups.count() - 1
-    pooled = np.sqrt((groups.var(ddof=1).fillna(0) * dof).sum() / dof.sum())
-    gap2 = (diff / pooled).max()
+    gap2 = (diff / pooled_sd(both, by=("scene", "U_mm_s", "omega_rad_s"))).max()
     row = {"scene": name, "points": len(common), "runs": len(runs), "cpu_s_per_run": runs["cpu_s"].mean() * cpu_scale,
            "min_supply_margin": runs["supply_margin"].min() if "supply_margin" in runs else np.nan}
     row.update({f"max_diff_sd_{label}": gap[m] for m, label in METRICS.items()})
