@@ -35,9 +35,10 @@ system-packages:
 	fi
 	@command -v liggghts >/dev/null || { echo "error: liggghts is not on PATH after installing"; exit 1; }
 
-$(VENV)/.installed: requirements.txt
+$(VENV)/.installed: requirements.txt pyproject.toml
 	python3 -m venv $(VENV)
 	$(VENV)/bin/pip install --quiet --disable-pip-version-check -r requirements.txt  # with bytecode: PYTHONDONTWRITEBYTECODE may be set, and every job would compile its imports
+	$(VENV)/bin/pip install --quiet --disable-pip-version-check --no-deps -e .  # the `analysis` package itself
 	touch $@
 
 clean:

@@ -6,7 +6,7 @@ Usage (after ``make map``: it reads the default dataset, runs no DEM)::
 
 ``bench_adaptive.py`` measures designs on real DEM runs, but with one noise
 draw and 16 held-out runs its ranking of designs is itself noisy.  Here the
-truth is known: a Gaussian process (:class:`~analysis.model_choice.GPSurrogate`)
+truth is known: a Gaussian process (:class:`~analysis.surrogate.candidates.GPSurrogate`)
 fitted to the 45 grid runs gives a smooth surface with the DEM data's own
 length scales, and its white-noise term the run-to-run noise.  A design's
 "run" is the truth plus a fresh noise draw; its error is the GP it fits
@@ -14,7 +14,7 @@ against the noise-free truth on a 25 x 25 grid over the sweep box
 (nRMSE = RMSE / std of the truth, mean over the four metrics).  Repeated
 ``--reps`` times (noise draws and Sobol seeds), for: the nested grids (9, 15,
 25, 27, 45 runs), Sobol designs and the adaptive loop
-(:func:`analysis.adaptive.run_adaptive`, 10 Sobol points and batches of 3, up
+(:func:`analysis.surrogate.adaptive.run_adaptive`, 10 Sobol points and batches of 3, up
 to ``--max-runs``) with each acquisition (``mepe``, ``imse``), scored after
 every round.
 
@@ -33,13 +33,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.config import load_config
+from analysis.metrics.dataset import METRICS
+from analysis.surrogate.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds
+from analysis.surrogate.candidates import GPSurrogate
+from analysis.surrogate.data import inputs_of, targets_of
+from benchmarks.bench_adaptive import cpu_model, subgrids
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds  # noqa: E402
-from analysis.config import load_config  # noqa: E402
-from analysis.model_choice import GPSurrogate  # noqa: E402
-from analysis.surrogate import METRICS, inputs_of, targets_of  # noqa: E402
-from benchmarks.bench_adaptive import cpu_model, subgrids  # noqa: E402
 
 
 def main(argv=None) -> int:

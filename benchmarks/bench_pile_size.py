@@ -24,12 +24,12 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
+from analysis.config import load_config, run_name, scene
+from analysis.dem.simulate import spread
+from analysis.metrics.dump import read_dump
+from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config, run_name, scene  # noqa: E402
-from analysis.dump import read_dump  # noqa: E402
-from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
-from analysis.simulate import spread  # noqa: E402
 
 #: The scene whose settled heaps and substrates every pile spreads from (benchmarks/scene_size.yaml).
 BASE_LEVEL = "fed_default"

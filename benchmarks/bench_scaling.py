@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.config import load_config, scene
+from analysis.dem.simulate import make_geometry, settle, spread
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config, scene  # noqa: E402
-from analysis.simulate import make_geometry, settle, spread  # noqa: E402
 
 U_MM_S, OMEGA = 100.0, -5.0
 

@@ -13,7 +13,7 @@ Reads each level's finished runs (every run folder's ``metrics.json``, ``health.
 
 - ``<name>_deposit.csv``, ``.png``: the reference's deposit profiles (layer mass per
   area along the travel) and, per point, where the layer reaches steady state
-  (:func:`analysis.deposit.steady_state_start`, plateau: the region's far half);
+  (:func:`analysis.metrics.deposit.steady_state_start`, plateau: the region's far half);
 - ``<name>_pile.csv``, ``.png`` (unfed levels only): per bin past the heap's toe, the layer's
   areal mass against the powder still ahead of the roller (mass balance): does the deposit
   depend on the pile?
@@ -40,12 +40,12 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from analysis.config import load_config, scene
+from analysis.metrics.deposit import deposit_profile, pile_ahead, profile_figure, run_profiles, steady_state_start
+from analysis.metrics.dump import read_dump
+from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config, scene  # noqa: E402
-from analysis.deposit import deposit_profile, pile_ahead, profile_figure, run_profiles, steady_state_start  # noqa: E402
-from analysis.dump import read_dump  # noqa: E402
-from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
 
 METRICS = {"mass_mg_mm2": "M_s/area", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
 #: Converged: every point mean within this many pooled reference sds.
@@ -119,7 +119,7 @@ def compare(name: str, runs: pd.DataFrame, ref_runs: pd.DataFrame, sd: pd.Series
 def deposit_against_pile(config: dict, levels: list[str]) -> pd.DataFrame:
     """Every bin past the settled heap's toe of every run of ``levels``: the layer's areal mass
     [mg/mm^2] against the powder still ahead of the roller there [mg/mm of width]
-    (:func:`analysis.deposit.pile_ahead`). A deposit that depends on the pile alone
+    (:func:`analysis.metrics.deposit.pile_ahead`). A deposit that depends on the pile alone
     collapses onto one curve whatever the heap's size."""
     tables = []
     for level in levels:

@@ -1,9 +1,8 @@
 # Shared by every rule file: the checked configuration, the fidelity level and the runs.
-from analysis.deposit import profile_runs as deposit_profile_runs  # noqa: E402
-from analysis.config import (ConfigError, design_points, load_config, run_name, scene,  # noqa: E402
-                             simulation_fingerprint)
+from analysis.metrics.deposit import profile_runs as deposit_profile_runs
+from analysis.config import ConfigError, design_points, load_config, run_name, scene, simulation_fingerprint
 
-try:
+try:  # the one check of the workflow's config (schema, then facts across keys); jobs trust it
     CONFIG = load_config(config, base_dir=workflow.basedir)
 except ConfigError as err:
     raise WorkflowError(f"config.yaml: {err}") from None

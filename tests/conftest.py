@@ -67,14 +67,14 @@ def fit_params():
     On this paper-like set alpha 0.1 (the paper's lambda, read literally)
     under-fits: test R down to 0.90 over seeds; alpha 0.01 gives R >= 0.98.
     """
-    from analysis.surrogate import DEFAULT_SURROGATE
+    from analysis.surrogate.network import DEFAULT_SURROGATE
     return {**DEFAULT_SURROGATE, "alpha": 0.01}
 
 
 @pytest.fixture(scope="session")
 def fitted(dataset, fit_params):
     """(model, scores) of the surrogate fitted on the synthetic dataset."""
-    from analysis.surrogate import fit_surrogate
+    from analysis.surrogate.network import fit_surrogate
     return fit_surrogate(dataset, fit_params)
 
 

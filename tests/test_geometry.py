@@ -3,10 +3,9 @@ import numpy as np
 import pytest
 import yaml
 
-from analysis import geometry
 from analysis.config import ConfigError, load_config, scene
-from analysis.simulate import make_geometry
-
+from analysis.dem import geometry
+from analysis.dem.simulate import make_geometry
 from tests.test_config import ROOT
 
 

@@ -8,15 +8,21 @@ import pandas as pd
 import pytest
 from conftest import synthetic_dataset, synthetic_metrics
 
-from analysis.maps import render_maps
-from analysis.model_choice import (DEFAULT_CHOICE, GPSurrogate, MLPEnsemble, TreeEnsemble,
-                                   choose_model, cross_validate_models, make_candidate,
-                                   model_choice_markdown, read_choice, write_model_choice)
-from analysis.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown
-from analysis.recommend import main, recommend
-from analysis.surrogate import (METRICS, inputs_of, point_folds, point_groups, point_means,
-                                predict_grid, predict_with_std, save_surrogate, split_runs,
-                                targets_of)
+from analysis.metrics.dataset import METRICS
+from analysis.metrics.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown
+from analysis.surrogate.candidates import DEFAULT_CHOICE, GPSurrogate, MLPEnsemble, TreeEnsemble, make_candidate
+from analysis.surrogate.data import inputs_of, point_folds, point_groups, point_means, split_runs, targets_of
+from analysis.surrogate.persistence import save_surrogate
+from analysis.surrogate.predict import predict_grid, predict_with_std
+from analysis.surrogate.recommend import main, recommend
+from analysis.surrogate.selection import (
+    choose_model,
+    cross_validate_models,
+    model_choice_markdown,
+    read_choice,
+    write_model_choice,
+)
+from analysis.viz.maps import render_maps
 
 NOISE = 0.05          # relative std of the synthetic runs' noise
 

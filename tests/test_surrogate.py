@@ -12,12 +12,14 @@ import sklearn
 from conftest import synthetic_dataset
 from sklearn.exceptions import ConvergenceWarning
 
-from analysis.model_choice import (DEFAULT_CHOICE, GPSurrogate, cross_validate_models,
-                                   write_model_choice)
-from analysis.surrogate import (DEFAULT_SURROGATE, METRICS, R_TARGET, deviation_from_paper,
-                                fit_surrogate, hybrid_indices, inputs_of, load_surrogate,
-                                predict_grid, read_split, regression_scores, save_surrogate,
-                                split_runs, split_table)
+from analysis.metrics.dataset import METRICS
+from analysis.surrogate.candidates import DEFAULT_CHOICE, GPSurrogate
+from analysis.surrogate.data import inputs_of, read_split, split_runs, split_table
+from analysis.surrogate.network import DEFAULT_SURROGATE, deviation_from_paper, fit_surrogate
+from analysis.surrogate.persistence import load_surrogate, save_surrogate
+from analysis.surrogate.predict import hybrid_indices, predict_grid
+from analysis.surrogate.scores import R_TARGET, regression_scores
+from analysis.surrogate.selection import cross_validate_models, write_model_choice
 
 
 def test_split_is_35_10_seeded_and_reproducible(dataset):

@@ -1,6 +1,6 @@
 """The paper's trend statements are detected on a dataset that has them, and
 refuted on one that has the opposite."""
-from analysis.trends import markdown, trend_table
+from analysis.metrics.trends import markdown, trend_table
 
 
 def test_paper_like_dataset_agrees_everywhere(dataset):

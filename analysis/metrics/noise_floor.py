@@ -8,7 +8,7 @@ the noise floor, and no surrogate can predict a single run better than it.
 
 :func:`noise_floor` tabulates it per point; :func:`accuracy_ceiling` turns it
 into the best cross-validated scores a perfect model of the mean could reach
-on these runs (compare :mod:`analysis.model_choice`'s table against them).
+on these runs (compare :mod:`analysis.surrogate.selection`'s table against them).
 
 Columns, units: as the dataset (``U_mm_s`` mm/s, ``omega_rad_s`` rad/s,
 ``mass_g`` g, ``throughput_mm2_s`` mm^2/s, ``roughness_um`` um,
@@ -19,8 +19,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from analysis.surrogate import INPUTS, METRICS, point_groups, point_means
-from analysis.workflow import atomic_path
+from analysis.io import atomic_path
+from analysis.metrics.dataset import METRICS
+from analysis.surrogate.data import INPUTS, point_groups, point_means
 
 #: Row label of the pooled summary in the noise-floor table.
 POOLED = "pooled"

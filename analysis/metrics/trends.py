@@ -1,6 +1,6 @@
 """The paper's section-3 statements, checked against a dataset.
 
-``python -m analysis.trends results/default/dataset.csv`` prints a Markdown
+``python -m analysis.metrics.trends results/default/dataset.csv`` prints a Markdown
 table: the paper's statement beside what this dataset shows.
 """
 from __future__ import annotations

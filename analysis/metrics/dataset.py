@@ -3,15 +3,24 @@ metrics, extras, cost and health), refusing any run whose health is unsound."""
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from analysis.simulate import MAX_OVERLAP
+from analysis.dem.health import MAX_OVERLAP
+from analysis.io import atomic_path
 
-METRICS = ["mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"]
+# The four layer metrics of the paper (eqs. 1-7): dataset column -> (symbol, unit)
+METRICS = {
+    "mass_g": ("M_s", "g"),
+    "throughput_mm2_s": ("Q_s", "mm^2/s"),
+    "roughness_um": ("R_q", "um"),
+    "porosity_pct": ("Phi", "%"),
+}
+
+
+
 HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller", "atoms", "lost", "through_substrate",
           "through_roller", "max_overlap_fraction", "peak_speed_m_s", "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m", "cpu_s"]
 
@@ -70,7 +79,6 @@ def build_dataset(metrics_files, health_files, benchmark_files, out, level: str 
         check_run(row, level, keep_supply_limited)
         rows.append(row)
     table = pd.DataFrame(rows).sort_values(["U_mm_s", "omega_rad_s", "replicate"], ignore_index=True)
-    tmp = Path(f"{out}.tmp")
-    table.to_csv(tmp, index=False)
-    os.replace(tmp, out)
+    with atomic_path(out) as tmp:
+        table.to_csv(tmp, index=False)
     return table

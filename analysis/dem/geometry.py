@@ -5,12 +5,12 @@ strip), z up; the substrate's mean plane is z = 0.
 """
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import trimesh
+
+from analysis.io import write_bytes
 
 
 def gaussian_random_field(nx: int, ny: int, spacing: float, correlation_length: float,
@@ -123,14 +123,8 @@ def roller(diameter: float, length: float, facets: int, capped: bool = True) -> 
 
 
 def write_stl(mesh: trimesh.Trimesh, path: str | Path) -> Path:
-    """Write an ASCII STL atomically (a temp file in the same folder, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".stl.tmp")
-    with os.fdopen(fd, "wb") as f:
-        f.write(trimesh.exchange.stl.export_stl_ascii(mesh).encode())
-    os.replace(tmp, path)
-    return path
+    """Write an ASCII STL atomically (:func:`analysis.io.atomic_path`)."""
+    return write_bytes(trimesh.exchange.stl.export_stl_ascii(mesh).encode(), path)
 
 
 def load_stl(path: str | Path) -> trimesh.Trimesh:

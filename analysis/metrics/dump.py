@@ -36,12 +36,18 @@ import pandas as pd
 
 __all__ = ["DumpError", "Frame", "read_dump", "write_dump"]
 
+
 #: Columns a dump must have for the spread-layer analysis.
 REQUIRED_COLUMNS = ("x", "y", "z", "radius")
 
+
 _GZIP_MAGIC = b"\x1f\x8b"
+
+
 # One match per frame: group 1 is the timestep value.
 _FRAME_START = re.compile(rb"ITEM: TIMESTEP[ \t]*\r?\n[ \t]*(\S+)")
+
+
 _HEADER_LINES = 9  # TIMESTEP, value, NUMBER OF ATOMS, N, BOX BOUNDS, 3 bounds, ATOMS
 
 

@@ -1,0 +1,178 @@
+"""The Design of Simulations' dataset as a regression problem: input and
+target columns, (U, omega) point labels, grouped splits and folds (replicates
+of a point never straddle a split), point means and split files.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from sklearn.model_selection import KFold, train_test_split
+
+from analysis.metrics.dataset import METRICS
+
+#: Input columns and their units.
+INPUTS = {"U_mm_s": "mm/s", "omega_rad_s": "rad/s"}
+
+
+
+def point_groups(df):
+    """Label of each run's (U, omega) point, numbered in order of first appearance.
+
+    Replicates (runs at the same speeds from different heap packings) share a
+    label; with one run per point the labels are ``0 .. n-1`` in row order.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        Has ``U_mm_s`` (mm/s) and ``omega_rad_s`` (rad/s).
+
+    Returns
+    -------
+    numpy.ndarray of int, shape (n_runs,)
+    """
+    keys = df[list(INPUTS)].to_numpy(float)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    rank = np.argsort(np.argsort(first))
+    return rank[inverse.ravel()]
+
+
+def split_runs(df, n_test, seed):
+    """Split the runs into training and test sets by (U, omega) point, reproducibly.
+
+    All replicates of one point fall on the same side, so a test point is
+    never seen in training through its twin.  With one run per point this is
+    the plain seeded split of the runs.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        One row per DEM run.
+    n_test : int
+        Number of test (U, omega) points (the paper: 10 of 45).
+    seed : int
+        Seed of the shuffle.
+
+    Returns
+    -------
+    train_idx, test_idx : numpy.ndarray of int
+        Sorted row positions (``df.iloc``) of the training and test runs.
+    """
+    groups = point_groups(df)
+    n = int(groups.max()) + 1 if len(groups) else 0
+    if not 1 <= n_test < n:
+        raise ValueError(f"n_test={n_test} must be between 1 and {n - 1} for {n} (U, omega) points")
+    _, test_points = train_test_split(np.arange(n), test_size=int(n_test), random_state=int(seed))
+    is_test = np.isin(groups, test_points)
+    return np.flatnonzero(~is_test), np.flatnonzero(is_test)
+
+
+def point_folds(df, folds, seed):
+    """Shuffled k-fold splits of the runs by (U, omega) point (replicates stay together).
+
+    With one run per point these are exactly ``KFold(folds, shuffle=True,
+    random_state=seed)`` over the runs.
+
+    Returns
+    -------
+    list of (train_idx, test_idx)
+        Row positions, usable as ``cv=`` of scikit-learn's model selection.
+    """
+    groups = point_groups(df)
+    n = int(groups.max()) + 1
+    if not 2 <= int(folds) <= n:
+        raise ValueError(f"cv folds={folds} must be between 2 and the {n} (U, omega) points")
+    splitter = KFold(int(folds), shuffle=True, random_state=int(seed))
+    return [(np.flatnonzero(np.isin(groups, tr)), np.flatnonzero(np.isin(groups, te)))
+            for tr, te in splitter.split(np.arange(n))]
+
+
+def point_means(df, split=None):
+    """One row per (U, omega) point: the replicate mean, std and count of each metric.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        The runs (speeds and the four metrics).
+    split : (array of int, array of int), optional
+        Row positions of the training and test runs (by point, see
+        :func:`split_runs`); mapped to point positions.
+
+    Returns
+    -------
+    points : pandas.DataFrame
+        In order of first appearance: ``U_mm_s``, ``omega_rad_s``,
+        ``n_replicates``, the metric means (their column names) and
+        ``<metric>_sd`` (seed-to-seed standard deviation, ddof 1; 0 for a
+        single run), in the metrics' units.
+    point_split : (array of int, array of int) or None
+        Point positions of the training and test points.
+    """
+    groups = point_groups(df)
+    frame = df[list(INPUTS) + list(METRICS)].assign(_point=groups)
+    grouped = frame.groupby("_point", sort=True)
+    points = grouped[list(INPUTS) + list(METRICS)].mean().reset_index(drop=True)
+    points.insert(2, "n_replicates", grouped.size().to_numpy())
+    sd = grouped[list(METRICS)].std(ddof=1).fillna(0.0).reset_index(drop=True)
+    for m in METRICS:
+        points[f"{m}_sd"] = sd[m].to_numpy()
+    if split is None:
+        return points, None
+    test_points = np.unique(groups[np.asarray(split[1], int)])
+    is_test = np.isin(np.arange(len(points)), test_points)
+    return points, (np.flatnonzero(~is_test), np.flatnonzero(is_test))
+
+
+def split_table(df, train_idx, test_idx):
+    """The split as a table (for split.csv): row, U_mm_s, omega_rad_s, replicate/seed if present, set."""
+    if len(train_idx) + len(test_idx) != len(df):
+        raise ValueError("train and test rows do not cover the dataset")
+    table = df[[c for c in (*INPUTS, "replicate", "seed") if c in df.columns]].reset_index(drop=True)
+    table.insert(0, "row", np.arange(len(df)))
+    table["set"] = "train"
+    table.loc[np.asarray(test_idx), "set"] = "test"
+    return table
+
+
+def read_split(path, df):
+    """Read split.csv back as ``(train_idx, test_idx)``, checked against ``df``.
+
+    Raises
+    ------
+    ValueError
+        If the file's rows do not match ``df`` (different run count or speeds),
+        i.e. the split was made on another dataset.
+    """
+    table = pd.read_csv(path)
+    if len(table) != len(df) or not np.allclose(
+            table[list(INPUTS)].to_numpy(float), df[list(INPUTS)].to_numpy(float)):
+        raise ValueError(f"{path} does not match the dataset's runs (rows or speeds differ)")
+    is_test = (table["set"] == "test").to_numpy()
+    rows = table["row"].to_numpy()
+    return np.sort(rows[~is_test]), np.sort(rows[is_test])
+
+
+def inputs_of(df):
+    """(n, 2) float array of U [mm/s] and omega [rad/s]."""
+    return df[list(INPUTS)].to_numpy(float)
+
+
+def targets_of(df):
+    """(n, 4) float array of the metrics in :data:`METRICS` order."""
+    return df[list(METRICS)].to_numpy(float)
+
+
+def _names():
+    """Input and metric columns with their units, for scores and metadata."""
+    return {"inputs": dict(INPUTS),
+            "metrics": {m: {"symbol": s, "unit": u} for m, (s, u) in METRICS.items()}}
+
+
+def _check_dataset(df):
+    missing = [c for c in (*INPUTS, *METRICS) if c not in df.columns]
+    if missing:
+        raise KeyError(f"dataset lacks columns: {', '.join(missing)}")
+    bad = ~np.isfinite(np.c_[inputs_of(df), targets_of(df)]).all(axis=1)
+    if bad.any():
+        raise ValueError(f"dataset rows {np.flatnonzero(bad).tolist()} have missing or "
+                         "non-finite speeds or metrics; fix or drop those runs first")
