@@ -66,13 +66,16 @@ def test_replicates_of_a_point_never_straddle_train_and_test():
         assert len(te) % 3 == 0
 
 
-def test_one_replicate_split_is_the_plain_row_split(dataset):
-    from sklearn.model_selection import KFold, train_test_split
-    _, test = train_test_split(np.arange(45), test_size=10, random_state=0)
-    assert split_runs(dataset, 10, 0)[1].tolist() == sorted(test)
-    plain = list(KFold(5, shuffle=True, random_state=2).split(np.arange(45)))
-    for (a_tr, a_te), (b_tr, b_te) in zip(point_folds(dataset, 5, 2), plain):
-        assert a_te.tolist() == sorted(b_te)
+def test_folds_test_every_point_exactly_once():
+    df = replicated(2, 0.02)
+    groups = point_groups(df)
+    folds = point_folds(df, 5, 2)
+    tested = np.concatenate([te for _, te in folds])
+    assert sorted(tested) == list(range(len(df)))              # a partition of the runs
+    assert all(len(np.unique(groups[te])) == 9 for _, te in folds)   # 45 points / 5 folds
+    assert [te.tolist() for _, te in folds] != [te.tolist() for _, te in point_folds(df, 5, 3)]  # seeded
+    loo = point_folds(df, 45, 0)
+    assert len(loo) == 45 and all(len(np.unique(groups[te])) == 1 for _, te in loo)
 
 
 def test_point_means_average_the_replicates():

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from sklearn.model_selection import KFold, train_test_split
+from sklearn.model_selection import GroupKFold, GroupShuffleSplit, LeaveOneGroupOut
 
 from analysis.metrics.dataset import METRICS
 
@@ -62,16 +62,17 @@ def split_runs(df, n_test, seed):
     n = int(groups.max()) + 1 if len(groups) else 0
     if not 1 <= n_test < n:
         raise ValueError(f"n_test={n_test} must be between 1 and {n - 1} for {n} (U, omega) points")
-    _, test_points = train_test_split(np.arange(n), test_size=int(n_test), random_state=int(seed))
-    is_test = np.isin(groups, test_points)
-    return np.flatnonzero(~is_test), np.flatnonzero(is_test)
+    splitter = GroupShuffleSplit(n_splits=1, test_size=int(n_test), random_state=int(seed))
+    train, test = next(splitter.split(groups, groups=groups))
+    return np.sort(train), np.sort(test)
 
 
 def point_folds(df, folds, seed):
     """Shuffled k-fold splits of the runs by (U, omega) point (replicates stay together).
 
-    With one run per point these are exactly ``KFold(folds, shuffle=True,
-    random_state=seed)`` over the runs.
+    ``GroupKFold(folds, shuffle=True, random_state=seed)`` over the runs,
+    grouped by :func:`point_groups`; with as many folds as points, one point
+    is left out at a time (``LeaveOneGroupOut``).
 
     Returns
     -------
@@ -82,9 +83,9 @@ def point_folds(df, folds, seed):
     n = int(groups.max()) + 1
     if not 2 <= int(folds) <= n:
         raise ValueError(f"cv folds={folds} must be between 2 and the {n} (U, omega) points")
-    splitter = KFold(int(folds), shuffle=True, random_state=int(seed))
-    return [(np.flatnonzero(np.isin(groups, tr)), np.flatnonzero(np.isin(groups, te)))
-            for tr, te in splitter.split(np.arange(n))]
+    splitter = (LeaveOneGroupOut() if int(folds) == n
+                else GroupKFold(int(folds), shuffle=True, random_state=int(seed)))
+    return list(splitter.split(groups, groups=groups))
 
 
 def point_means(df, split=None):
