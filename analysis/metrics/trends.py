@@ -52,8 +52,8 @@ def trend_table(data: pd.DataFrame) -> list[tuple[str, str, str]]:
 
 
 def markdown(rows) -> str:
-    lines = ["| paper (section 3) | this dataset | agrees |", "|---|---|---|"]
-    return "\n".join(lines + [f"| {a} | {b} | {c} |" for a, b, c in rows])
+    """The rows of :func:`trend_table` as a Markdown table."""
+    return pd.DataFrame(rows, columns=["paper (section 3)", "this dataset", "agrees"]).to_markdown(index=False)
 
 
 if __name__ == "__main__":

@@ -151,22 +151,24 @@ def model_choice_markdown(table, chosen, ceiling=None, level=None):
     lines = [title, "",
              f"Chosen: **{chosen}** ({CANDIDATES.get(chosen, chosen)}): the highest repeated "
              "k-fold R^2 averaged over the four metrics. Folds are (U, omega) points: the "
-             "replicates of a point are left out together.", "",
-             "| " + " | ".join(head) + " |", "|---|---|---|---|---|---:|---:|---:|"]
+             "replicates of a point are left out together.", ""]
+
+    def joined(values, f):
+        return " / ".join("n/a" if not np.isfinite(v) else format(v, f) for v in values)
+
+    rows = []
     for (model, scheme), block in table.groupby(["model", "scheme"], sort=False):
         block = block.set_index("metric").loc[list(METRICS)]
-        name = f"**{model}**" if model == chosen else model
-        fmt = lambda col, f: " / ".join("n/a" if not np.isfinite(v) else format(v, f)  # noqa: E731
-                                        for v in block[col])
-        lines.append(f"| {name} | {scheme} | {fmt('R', '.3f')} | {fmt('R2', '.3f')} | "
-                     f"{fmt('MAPE_pct', '.1f')} | {block['R2'].mean():.3f} | "
-                     f"{int(block['n_splits'].iloc[0])} | {block['fit_s'].iloc[0]:.1f} |")
+        rows.append([f"**{model}**" if model == chosen else model, scheme, joined(block["R"], ".3f"),
+                     joined(block["R2"], ".3f"), joined(block["MAPE_pct"], ".1f"), f"{block['R2'].mean():.3f}",
+                     str(int(block["n_splits"].iloc[0])), f"{block['fit_s'].iloc[0]:.1f}"])
     if ceiling:
         c = [ceiling[m] for m in METRICS]
-        fmt = lambda key, f: " / ".join(format(x[key], f) for x in c)  # noqa: E731
-        lines.append(f"| *noise ceiling* | replicates | {fmt('R_max', '.3f')} | "
-                     f"{fmt('R2_max', '.3f')} | {fmt('MAPE_floor_pct', '.1f')} | "
-                     f"{np.mean([x['R2_max'] for x in c]):.3f} | | |")
+        rows.append(["*noise ceiling*", "replicates", joined([x["R_max"] for x in c], ".3f"),
+                     joined([x["R2_max"] for x in c], ".3f"), joined([x["MAPE_floor_pct"] for x in c], ".1f"),
+                     f"{np.mean([x['R2_max'] for x in c]):.3f}", "", ""])
+    lines.append(pd.DataFrame(rows, columns=head).to_markdown(index=False, colalign=["left"] * 5 + ["right"] * 3))
+    if ceiling:
         lines += ["", "The noise ceiling is the best a perfect model of the mean metric could "
                   "score on single runs, given the seed-to-seed spread (noise_floor.md): "
                   "no model can beat it, and scores near it mean the model is as good as the "
