@@ -6,5 +6,6 @@ from analysis.io import write_text
 from analysis.metrics.trends import markdown, trend_table
 from analysis.rule import rule_context
 
-with rule_context(snakemake):
-    write_text(markdown(trend_table(pd.read_csv(snakemake.input[0]))) + "\n", snakemake.output[0])
+with rule_context(snakemake) as config:
+    table = trend_table(pd.read_csv(snakemake.input[0]), roller_radius_mm=config["roller"]["diameter_mm"] / 2)
+    write_text(markdown(table) + "\n", snakemake.output[0])

@@ -7,8 +7,10 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 
-ROLLER_RADIUS_MM = 15.0
+ROLLER_RADIUS_MM = yaml.safe_load((Path(__file__).resolve().parents[1] / "config.yaml").read_text())[
+    "roller"]["diameter_mm"] / 2
 U_SWEEP = (40, 55, 70, 85, 100)                    # mm/s
 OMEGA_SWEEP = (-20, -15, -10, -5, 0, 5, 10, 15, 20)  # rad/s
 

@@ -62,9 +62,9 @@ def test_roller_travels_U_t_and_turns_as_the_paper_says(smoke):
     assert travelled == pytest.approx(U_MM_S * 1e-3 * steps * s.timestep, rel=1e-5)  # dt printed to 6 digits
     bottom = np.argmin(c1[:, 2])
     # the roller's bottom point moves at U + omega R along the travel (paper: +25 mm/s here)
-    assert v1[bottom, 0] * 1e3 == pytest.approx(U_MM_S + OMEGA * 15.0, abs=0.2)
+    assert v1[bottom, 0] * 1e3 == pytest.approx(U_MM_S + OMEGA * s.roller_radius * 1e3, abs=0.2)
     top = np.argmax(c1[:, 2])
-    assert v1[top, 0] * 1e3 == pytest.approx(U_MM_S - OMEGA * 15.0, abs=0.2)
+    assert v1[top, 0] * 1e3 == pytest.approx(U_MM_S - OMEGA * s.roller_radius * 1e3, abs=0.2)
 
 
 def test_spread_lays_powder_past_the_heap_and_loses_nothing(smoke):
