@@ -11,7 +11,7 @@ from conftest import synthetic_dataset, synthetic_metrics
 
 from analysis.metrics.dataset import METRICS
 from analysis.metrics.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown
-from analysis.surrogate.candidates import DEFAULT_CHOICE, GPSurrogate, MLPEnsemble, TreeEnsemble, make_candidate
+from analysis.surrogate.candidates import GPSurrogate, MLPEnsemble, TreeEnsemble, make_candidate
 from analysis.surrogate.data import inputs_of, point_folds, point_groups, point_means, split_runs, targets_of
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import predict_grid, predict_with_std
@@ -186,7 +186,7 @@ def cv_small(fit_params):
         return synthetic_metrics(U, omega)
     df = replicated(2, 0.03, metrics=metrics)
     df = df[df.omega_rad_s.isin([-20, -10, 0, 10, 20])].reset_index(drop=True)   # 25 points
-    params = {**fit_params, **DEFAULT_CHOICE, "hidden_units": 50, "mlp_members": 2,
+    params = {**fit_params, "hidden_units": 50, "mlp_members": 2,
               "cv_repeats": 2, "cv_folds": 5, "gp_restarts": 0, "tree_count": 50}
     return df, params, cross_validate_models(df, params)
 
@@ -252,7 +252,7 @@ def test_scripts_write_noise_floor_and_model_choice(tmp_path, fake_snakemake, fi
                          {"level": "smoke"})
     runpy.run_path(str(smk.scriptdir / "noise_floor.py"), init_globals={"snakemake": smk})
     assert len(pd.read_csv(tmp_path / "nf.csv")) == 15 + 1
-    params = {**fit_params, **DEFAULT_CHOICE, "models": ["gp", "trees"], "cv_repeats": 1,
+    params = {**fit_params, "models": ["gp", "trees"], "cv_repeats": 1,
               "cv_folds": 3, "cv_loo": False, "tree_count": 20}
     smk = fake_snakemake({"dataset": str(tmp_path / "dataset.csv")},
                          {"csv": str(tmp_path / "mc.csv"), "md": str(tmp_path / "mc.md")},

@@ -13,9 +13,9 @@ from conftest import synthetic_dataset
 from sklearn.exceptions import ConvergenceWarning
 
 from analysis.metrics.dataset import METRICS
-from analysis.surrogate.candidates import DEFAULT_CHOICE, GPSurrogate
+from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, read_split, split_runs, split_table
-from analysis.surrogate.network import DEFAULT_SURROGATE, deviation_from_paper, fit_surrogate
+from analysis.surrogate.network import deviation_from_paper, fit_surrogate
 from analysis.surrogate.persistence import load_surrogate, save_surrogate
 from analysis.surrogate.predict import hybrid_indices, predict_grid
 from analysis.surrogate.scores import R_TARGET, regression_scores
@@ -66,9 +66,9 @@ def test_scores_structure_and_json(fitted, dataset):
     json.dumps(scores, allow_nan=False)          # strictly valid JSON
 
 
-def test_papers_literal_adam_setting_does_not_converge(dataset):
+def test_papers_literal_adam_setting_does_not_converge(dataset, fit_params):
     """Why the default deviates: adam at learning rate 1e-4 in 200 epochs."""
-    literal = {**DEFAULT_SURROGATE, "solver": "adam", "learning_rate_init": 1e-4, "max_iter": 200}
+    literal = {**fit_params, "solver": "adam", "learning_rate_init": 1e-4, "max_iter": 200}
     with pytest.warns(ConvergenceWarning, match="did not converge"):
         _, scores = fit_surrogate(dataset, literal)
     assert scores["fit"]["converged"] is False
@@ -80,8 +80,8 @@ def test_papers_literal_adam_setting_does_not_converge(dataset):
     assert "as the paper's Table 2" in scores["deviation_from_paper"]
 
 
-def test_default_deviation_is_stated():
-    text = deviation_from_paper(DEFAULT_SURROGATE)
+def test_default_deviation_is_stated(fit_params):
+    text = deviation_from_paper(fit_params)
     assert "solver='lbfgs'" in text and "adam" in text and "does not converge" in text
 
 
@@ -160,7 +160,7 @@ def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
     cross-validation (here a GP, from a model_choice.csv naming it)."""
     data = synthetic_dataset(0, noise=0.01)
     data.to_csv(tmp_path / "dataset.csv", index=False)
-    params = {**fit_params, **DEFAULT_CHOICE, "grid_points": 11, "models": ["gp"],
+    params = {**fit_params, "grid_points": 11, "models": ["gp"],
               "cv_repeats": 1, "cv_loo": False}
     write_model_choice(cross_validate_models(data, params), "gp", tmp_path / "choice.csv",
                        tmp_path / "choice.md")

@@ -18,13 +18,9 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
-from analysis.surrogate.network import N_INIT_DEFAULT, make_surrogate
+from analysis.surrogate.network import make_surrogate
 
 #: Candidate names and what they are (for tables and the report).
-DEFAULT_CHOICE = {"models": ["mlp", "gp", "trees"], "cv_repeats": 3, "cv_loo": True,
-                  "mlp_members": 5, "gp_restarts": 2, "tree_count": 300}
-
-
 CANDIDATES = {
     "mlp": "paper's Table 2 network, ensemble over random seeds",
     "gp": "Gaussian process, anisotropic RBF + white noise, one per metric",
@@ -165,7 +161,7 @@ class MLPEnsemble(RegressorMixin, BaseEstimator):
 
     def fit(self, X, Y):
         """Fit every member on X (n, 2) [mm/s, rad/s] and Y (n, 4)."""
-        n_init = int(self.params.get("n_init", N_INIT_DEFAULT))
+        n_init = int(self.params["n_init"])
         base = int(self.params["random_state"])
         self.members_ = [make_surrogate({**self.params, "random_state": base + k * n_init}).fit(X, Y)
                          for k in range(int(self.n_members))]
@@ -225,7 +221,7 @@ def make_candidate(name, params):
     ValueError
         For an unknown name (the message lists the known ones).
     """
-    p = {**DEFAULT_CHOICE, **params}
+    p = params
     if name == "mlp":
         return MLPEnsemble(dict(params), n_members=int(p["mlp_members"]))
     if name == "gp":

@@ -61,26 +61,6 @@ from analysis.surrogate.data import (
 )
 from analysis.surrogate.scores import _MAPE_NOTE, R_TARGET, _score_text, regression_scores
 
-#: Values of config.yaml's ``surrogate:`` section, for tests only; the
-#: workflow always passes the config's dict.
-DEFAULT_SURROGATE = {
-    "hidden_units": 200,
-    "activation": "logistic",
-    "alpha": 0.1,
-    "solver": "lbfgs",
-    "learning_rate_init": 1e-4,
-    "max_iter": 5000,
-    "n_test": 10,
-    "split_seed": 0,
-    "cv_folds": 5,
-    "random_state": 0,
-}
-
-
-#: Restarts when ``params`` has no ``n_init`` (see :class:`RestartedMLP`).
-N_INIT_DEFAULT = 3
-
-
 _MODEL_KEYS = ("hidden_units", "activation", "alpha", "solver",
                "learning_rate_init", "max_iter", "random_state")
 
@@ -155,7 +135,7 @@ def make_surrogate(params):
         loss on standardised targets), ``solver``, ``learning_rate_init``
         (1/epoch; used by 'adam' and 'sgd' only), ``max_iter`` (epochs for
         'adam'/'sgd', iterations for 'lbfgs'), ``random_state`` and the
-        optional ``n_init`` (restarts, default :data:`N_INIT_DEFAULT`, see
+        ``n_init`` (restarts, see
         :class:`RestartedMLP`); other keys are ignored.
 
     Returns
@@ -178,7 +158,7 @@ def make_surrogate(params):
         max_iter=int(params["max_iter"]),
         random_state=int(params["random_state"]),
     )
-    net = RestartedMLP(net, n_init=int(params.get("n_init", N_INIT_DEFAULT)))
+    net = RestartedMLP(net, n_init=int(params["n_init"]))
     return Pipeline([
         ("scale_inputs", StandardScaler()),
         ("net", TransformedTargetRegressor(regressor=net, transformer=StandardScaler())),
@@ -201,7 +181,7 @@ def deviation_from_paper(params):
                     "(tol 1e-9) on a smooth toy; lbfgs converges in under a second (it ignores "
                     "the learning rate). Set solver: adam in config.yaml for the paper's "
                     "literal setting.")
-    n_init = int(params.get("n_init", N_INIT_DEFAULT))
+    n_init = int(params["n_init"])
     return (training + " Not in the paper: inputs and the 4 targets are standardised before "
             f"the network; the best of {n_init} initialisation(s) (lowest training objective) "
             f"is kept; alpha={params['alpha']} is scikit-learn's L2 penalty against the loss "
@@ -277,7 +257,7 @@ def fit_surrogate(df, params):
         "sklearn_version": sklearn.__version__,
         "n_runs": len(df),
         **_names(),
-        "params": {**params, "n_init": int(params.get("n_init", N_INIT_DEFAULT))},
+        "params": {**params, "n_init": int(params["n_init"])},
         "deviation_from_paper": deviation_from_paper(params),
         "fit": {"solver": params["solver"],
                 "n_iter": int(model[-1].regressor_.n_iter_),

@@ -38,7 +38,7 @@ from joblib import Parallel, delayed
 
 from analysis.io import atomic_path
 from analysis.metrics.dataset import METRICS
-from analysis.surrogate.candidates import CANDIDATES, DEFAULT_CHOICE, GPSurrogate, make_candidate
+from analysis.surrogate.candidates import CANDIDATES, GPSurrogate, make_candidate
 from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, point_groups, targets_of
 from analysis.surrogate.network import _convergence_messages
 from analysis.surrogate.scores import _num, regression_scores
@@ -83,7 +83,7 @@ def cross_validate_models(df, params, log=None, n_jobs=1):
         ``R2_sd``, ``MAPE_pct_sd``, ``n_splits`` (folds x repeats, or points),
         ``fit_s`` (the scheme's fits, summed over its folds), ``convergence_warnings``.
     """
-    p = {**DEFAULT_CHOICE, **params}
+    p = params
     _check_dataset(df)
     X, Y = inputs_of(df), targets_of(df)
     n_points = int(point_groups(df).max()) + 1
