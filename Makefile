@@ -1,6 +1,6 @@
 # spreadmap: the two commands of the README.
 #   make map    set everything up, run the workflow at the `default` fidelity level
-#   make test   set everything up, run the test suite
+#   make test   set everything up, run the linters and the test suite
 # Both install what is missing (LIGGGHTS from Debian's packages, a virtual
 # environment from requirements.txt) and are safe to repeat.
 
@@ -23,6 +23,7 @@ map: setup
 	@echo "Process maps: results/$(LEVEL)/maps/  report: results/$(LEVEL)/report.html"
 
 test: setup
+	PYTHON=$(PYTHON) .ci/lint
 	$(PYTHON) -m pytest -n 2 --dist loadgroup -q tests
 
 setup: system-packages $(VENV)/.installed

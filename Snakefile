@@ -2,7 +2,8 @@
 # The method is the paper's spreading process maps (Figures 6-10); see README.md.
 from snakemake.utils import min_version
 
-from analysis.config import coerce_cli_values  # the package, installed by the README's setup
+# the analysis package is installed by the README's setup (pip install -e .)
+from analysis.config import coerce_cli_values
 
 min_version("9.0")
 
@@ -25,7 +26,18 @@ include: "rules/maps.smk"
 
 
 # On a cluster (profiles/slurm) only settle and spread are submitted; the rest is light.
-localrules: all, geometry, layer_metrics, dataset, deposit_profile, trends, noise_floor, model_choice, surrogate, maps, top_view
+localrules:
+    all,
+    geometry,
+    layer_metrics,
+    dataset,
+    deposit_profile,
+    trends,
+    noise_floor,
+    model_choice,
+    surrogate,
+    maps,
+    top_view,
 
 
 rule all:

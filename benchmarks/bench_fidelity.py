@@ -243,7 +243,8 @@ def main(argv=None) -> int:
     text = (f"# Run time against error ({args.level} level)\n\n" + when +
             f"Points (U mm/s, omega rad/s): {points}; {args.seeds} seeds (heap packings) per variant.\n"
             f"Error: mean over the points of |variant - reference| / mean |reference|, each the mean "
-            f"over its seeds; M_s per unit sampling area (a wider strip has a wider region).\n\nVariants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")
+            f"over its seeds; M_s per unit sampling area (a wider strip has a wider region).\n\n"
+            f"Variants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")
     (out / f"{args.name}.md").write_text(text)
     print(text)
     return 0

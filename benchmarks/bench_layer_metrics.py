@@ -111,7 +111,7 @@ def main():
             atoms = layers.setdefault(n, polydisperse_layer(n))
             substrate = str(stl) if sub == "stl" else None
 
-            def run():
+            def run(atoms=atoms, substrate=substrate, lines=lines):
                 return spread_layer_metrics(atoms, REGION, SPEED, DENSITY, substrate=substrate, n_lines=lines)
 
             seconds, peak = measure(run, repeats=3 if n * lines <= 1e8 else 1)

@@ -82,8 +82,10 @@ def main(argv=None) -> int:
     lines = ["# Pile size under forward rolling", "",
              f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, in "
              f"{time.perf_counter() - started:.0f} s ({args.jobs} runs at once), by "
-             f"`.venv/bin/python benchmarks/bench_pile_size.py {' '.join(argv if argv is not None else sys.argv[1:])}`.",
-             "", f"The fed_default scene at U = {args.U:g} mm/s, omega = {args.omega:g} rad/s, {args.replicates} replicates "
+             "`.venv/bin/python benchmarks/bench_pile_size.py "
+             f"{' '.join(argv if argv is not None else sys.argv[1:])}`.",
+             "", f"The fed_default scene at U = {args.U:g} mm/s, omega = {args.omega:g} rad/s, "
+             f"{args.replicates} replicates "
              "(its heap packings and substrates) per pile; mean and seed-to-seed sd; cost in LIGGGHTS CPU "
              "seconds per run. M_s per area in mg/mm^2, Q_s mm^2/s, R_q and thickness um, Phi %.", "",
              summary.reset_index().to_markdown(index=False, floatfmt=".3g"), ""]

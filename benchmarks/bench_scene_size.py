@@ -131,7 +131,8 @@ def deposit_against_pile(config: dict, levels: list[str]) -> pd.DataFrame:
             settle_dir = ROOT / "results" / level / "settle" / f"r{run['replicate']}"
             heap = read_dump(settle_dir / "settled.dump").atoms
             toe = json.loads((settle_dir / "health.json").read_text())["heap_toe_m"] * 1e3
-            heap_mass = 1e3 * s.density * 4 / 3 * np.pi * np.sum(heap["radius"].to_numpy() ** 3) / s.strip_width  # mg/mm
+            heap_volume = 4 / 3 * np.pi * np.sum(heap["radius"].to_numpy() ** 3)
+            heap_mass = 1e3 * s.density * heap_volume / s.strip_width  # mg/mm
             profile = deposit_profile(read_dump(folder / "final.dump").atoms, s.density, s.strip_width,
                                       (s.box[0], s.sampling_region[1]))
             profile["pile_mg_mm"] = pile_ahead(profile, heap_mass)
@@ -238,14 +239,16 @@ def main(argv=None) -> int:
              + ", ".join(f"({U:g}, {w:g}): {x:g} mm" for (U, w), x in starts.items()), "",
              f"Differences: max over the points of |mean - reference mean| / the reference's pooled seed-to-seed sd; "
              f"converged below {TOLERANCE_SD:g} for every metric. The reference's pooled seed-to-seed sd "
-             f"(noise floor; M_s/area in mg/mm^2, Q_s mm^2/s, R_q um, Phi %): {floor}. Cost: LIGGGHTS' CPU seconds per spreading run "
+             f"(noise floor; M_s/area in mg/mm^2, Q_s mm^2/s, R_q um, Phi %): {floor}. "
+             "Cost: LIGGGHTS' CPU seconds per spreading run "
              "(re-measured regions: the reference's cost scaled by their share of the travel).", "",
              table[[c for c in table if not c.startswith(("max_diff_pooled", "within", "seed_sd"))]].to_markdown(
                  index=False, floatfmt=".3g"), "",
              "The same differences in units of the two scenes' pooled seed-to-seed sd (both scenes' replicates, "
              f"pooled over the points: the usual effect size; within below {TOLERANCE_SD:g}), and each scene's own "
              "pooled seed-to-seed sd in % of its mean:", "",
-             table[["scene"] + [c for c in table if c.startswith(("max_diff_pooled", "within", "seed_sd"))]].to_markdown(
+             table[["scene"] + [c for c in table
+                                if c.startswith(("max_diff_pooled", "within", "seed_sd"))]].to_markdown(
                  index=False, floatfmt=".3g"), ""]
     (out / f"{args.name}.md").write_text("\n".join(lines))
     print("\n".join(lines))

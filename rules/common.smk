@@ -31,6 +31,7 @@ _U_MAX = max(U for U, _ in POINTS)
 _OMEGAS = sorted({min([w for U, w in POINTS if U == _U_MAX], key=lambda w: abs(w - t)) for t in (-5, 0, 5)})
 TOP_VIEWS = [f"{OUT}/top_views/{run_name(_U_MAX, w, 0)}.png" for w in _OMEGAS]
 
+
 wildcard_constraints:
     U=r"[0-9.e+-]+",
     omega=r"-?[0-9.e+-]+",

@@ -20,9 +20,9 @@ rule top_view:
         rules.spread.output.dump,
     output:
         report(f"{OUT}/top_views/U{{U}}_w{{omega}}_r{{rep}}.png", category="Top views"),
-    params:
-        region=SCENE.sampling_region,
     log:
         f"{LOGS}/top_view/U{{U}}_w{{omega}}_r{{rep}}.log",
+    params:
+        region=SCENE.sampling_region,
     script:
         "../scripts/top_view.py"

@@ -6,13 +6,13 @@ rule layer_metrics:
     output:
         metrics=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/metrics.json",
         vtk=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/final.vtp",  # here, not in a rule of its own: one Python start per run
-    params:
-        level=LEVEL,
-        profilometer=PROFILOMETER,
     log:
         f"{LOGS}/metrics/U{{U}}_w{{omega}}_r{{rep}}.log",
     benchmark:
         f"{BENCH}/metrics/U{{U}}_w{{omega}}_r{{rep}}.tsv"
+    params:
+        level=LEVEL,
+        profilometer=PROFILOMETER,
     script:
         "../scripts/layer_metrics.py"
 
@@ -50,10 +50,10 @@ rule deposit_profile:
     output:
         csv=f"{OUT}/deposit_profile.csv",
         png=report(f"{OUT}/deposit_profile.png", caption="../report/deposit_profile.rst", category="Dataset"),
+    log:
+        f"{LOGS}/deposit_profile.log",
     params:
         level=LEVEL,
         runs=PROFILE_RUNS,
-    log:
-        f"{LOGS}/deposit_profile.log",
     script:
         "../scripts/deposit_profile.py"

@@ -5,12 +5,12 @@ rule noise_floor:
     output:
         csv=f"{OUT}/surrogate/noise_floor.csv",
         md=report(f"{OUT}/surrogate/noise_floor.md", category="Surrogate"),
-    params:
-        level=LEVEL,
     log:
         f"{LOGS}/noise_floor.log",
     benchmark:
         f"{BENCH}/noise_floor.tsv"
+    params:
+        level=LEVEL,
     script:
         "../scripts/noise_floor.py"
 
@@ -22,14 +22,14 @@ rule model_choice:
     output:
         csv=f"{OUT}/surrogate/model_choice.csv",
         md=report(f"{OUT}/surrogate/model_choice.md", category="Surrogate"),
-    params:
-        surrogate=CONFIG["surrogate"],
-        level=LEVEL,
-    threads: 4  # folds fitted at once; Snakemake caps it at --cores
     log:
         f"{LOGS}/model_choice.log",
     benchmark:
         f"{BENCH}/model_choice.tsv"
+    threads: 4  # folds fitted at once; Snakemake caps it at --cores
+    params:
+        surrogate=CONFIG["surrogate"],
+        level=LEVEL,
     script:
         "../scripts/model_choice.py"
 
@@ -44,12 +44,12 @@ rule surrogate:
         scores=report(f"{OUT}/surrogate/scores.json", category="Surrogate"),
         split=f"{OUT}/surrogate/split.csv",
         grid=report(f"{OUT}/surrogate/grid.csv", category="Surrogate"),
-    params:
-        surrogate=CONFIG["surrogate"],
-        grid_points=CONFIG["surrogate"]["grid_points"],
     log:
         f"{LOGS}/surrogate.log",
     benchmark:
         f"{BENCH}/surrogate.tsv"
+    params:
+        surrogate=CONFIG["surrogate"],
+        grid_points=CONFIG["surrogate"]["grid_points"],
     script:
         "../scripts/fit_surrogate.py"

@@ -104,5 +104,6 @@ def test_supply_limited_runs_are_ringed_on_the_surfaces_and_the_process_map(fitt
     for fig in (surface_figure(model, limited, split, "mass_g", n=11), process_map_figure(model, limited, split, n=21)):
         labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
         assert any("supply-limited" in label for label in labels), labels
-    labels = [t.get_text() for t in surface_figure(model, dataset, split, "mass_g", n=11).axes[0].get_legend().get_texts()]
+    legend = surface_figure(model, dataset, split, "mass_g", n=11).axes[0].get_legend()
+    labels = [t.get_text() for t in legend.get_texts()]
     assert not any("supply-limited" in label for label in labels)

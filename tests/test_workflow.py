@@ -24,11 +24,15 @@ FIRST_U = [85, 100]
 SEED_SPREAD = {"mass_g": 4 * 7e-5, "throughput_mm2_s": 4 * 0.91, "roughness_um": 4 * 3.8, "porosity_pct": 4 * 0.96}
 
 
+# a surrogate small enough for the smoke runs
+SMALL_SURROGATE = 'surrogate={"n_test": 2, "cv_folds": 3, "cv_repeats": 1, "mlp_members": 2}'
+
+
 def snakemake_cmd(workdir, U, *extra):
     sweep = json.dumps({"U_mm_s": U, "omega_rad_s": OMEGAS, "replicates": 1})
     return [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-d", str(workdir),
             "--configfile", str(ROOT / "config.yaml"), "--cores", "2", "--rerun-incomplete",
-            "--config", "level=smoke", f"sweep={sweep}", 'surrogate={"n_test": 2, "cv_folds": 3, "cv_repeats": 1, "mlp_members": 2}', *extra]
+            "--config", "level=smoke", f"sweep={sweep}", SMALL_SURROGATE, *extra]
 
 
 @pytest.fixture(scope="module")
@@ -156,7 +160,7 @@ def test_spread_on_two_mpi_ranks_through_the_workflow_matches_one_rank(workflow)
     cmd = [sys.executable, "-m", "snakemake", "results/smoke/runs/U100_w0_r0/metrics.json",
            "-s", str(ROOT / "Snakefile"), "-d", str(workflow), "--configfile", str(ROOT / "config.yaml"),
            "--cores", "2", "--forcerun", "spread", "--config", "level=smoke", f"sweep={sweep}",
-           'surrogate={"n_test": 2, "cv_folds": 3, "cv_repeats": 1, "mlp_members": 2}', 'fidelity={"smoke": {"mpi_ranks": 2}}']
+           SMALL_SURROGATE, 'fidelity={"smoke": {"mpi_ranks": 2}}']
     proc = subprocess.run(cmd, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "rule settle:" not in proc.stderr + proc.stdout         # the same settled heap

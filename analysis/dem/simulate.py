@@ -84,7 +84,8 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
         lo, hi = substrate.bounds
         need = (s.substrate_x[0], s.substrate_x[1], 0.0, s.strip_width)
         if lo[0] > need[0] or hi[0] < need[1] or lo[1] > 1e-9 or hi[1] < s.strip_width - 1e-9:
-            raise ConfigError(f"config key 'substrate.stl' = {s.substrate['stl']!r}: covers x {lo[0]:.4g}..{hi[0]:.4g} m,"
+            raise ConfigError(f"config key 'substrate.stl' = {s.substrate['stl']!r}: "
+                              f"covers x {lo[0]:.4g}..{hi[0]:.4g} m,"
                               f" y {lo[1]:.4g}..{hi[1]:.4g} m; the bed needs x {need[0]:.4g}..{need[1]:.4g},"
                               f" y 0..{s.strip_width:.4g} m")
     else:
@@ -135,7 +136,8 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     out.mkdir(parents=True, exist_ok=True)
     if s.timestep > s.max_rayleigh_fraction * s.rayleigh_time:
         raise LiggghtsError(f"time step {s.timestep:.3g} s exceeds the allowed fraction of the Rayleigh time")
-    text = render("settle.in.j2", s=s, contact=contact_model(s), seeds=seeds(config, s, replicate), box=[f"{v:.6g}" for v in s.box],
+    text = render("settle.in.j2", s=s, contact=contact_model(s), seeds=seeds(config, s, replicate),
+                  box=[f"{v:.6g}" for v in s.box],
                   processors=processors_grid(s),
                   skin=skin(s), binsize=binsize(s), thermo_every=THERMO_EVERY,
                   **(rest_loop(s, s.settle_time) if max_steps is None else

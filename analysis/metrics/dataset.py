@@ -21,8 +21,10 @@ METRICS = {
 
 
 
-HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller", "atoms", "lost", "through_substrate",
-          "through_roller", "max_overlap_fraction", "peak_speed_m_s", "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m", "cpu_s"]
+HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller",
+          "atoms", "lost", "through_substrate", "through_roller", "max_overlap_fraction", "peak_speed_m_s",
+          "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction",
+          "roller_travel_m", "cpu_s"]
 
 
 class UnsoundRunError(ValueError):

@@ -141,7 +141,8 @@ def write_dump(path, atoms, box, timestep=0, append=False, periodic=(False, True
     bounds = "\n".join(f"{lo!r} {hi!r}" for lo, hi in box.tolist())
     header = (
         f"ITEM: TIMESTEP\n{int(timestep)}\nITEM: NUMBER OF ATOMS\n{len(atoms)}\n"
-        f"ITEM: BOX BOUNDS {' '.join('pp' if p else 'ff' for p in periodic)}\n{bounds}\nITEM: ATOMS {' '.join(atoms.columns)} \n"
+        f"ITEM: BOX BOUNDS {' '.join('pp' if p else 'ff' for p in periodic)}\n{bounds}\n"
+        f"ITEM: ATOMS {' '.join(atoms.columns)} \n"
     )
     body = atoms.to_csv(sep=" ", header=False, index=False, lineterminator="\n")
     mode = "at" if append else "wt"

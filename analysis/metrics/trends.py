@@ -33,7 +33,8 @@ def trend_table(data: pd.DataFrame, roller_radius_mm: float) -> list[tuple[str, 
                  "omega of least R_q per U: " + ", ".join(f"{u:g}: {w:g}" for u, w in argmin.items()),
                  "yes" if near_zero == 1 else "partly" if near_zero >= 0.5 else "no"))
     rows.append(("R_q rises more for negative than positive omega",
-                 f"mean R_q at omega < 0: {neg.roughness_um.mean():.1f} um, at omega > 0: {pos.roughness_um.mean():.1f} um",
+                 f"mean R_q at omega < 0: {neg.roughness_um.mean():.1f} um, "
+                 f"at omega > 0: {pos.roughness_um.mean():.1f} um",
                  "yes" if neg.roughness_um.mean() > pos.roughness_um.mean() else "no"))
     por = mean.pivot(index="U_mm_s", columns="omega_rad_s", values="porosity_pct")
     bottom = mean.U_mm_s + mean.omega_rad_s * roller_radius_mm
@@ -42,7 +43,8 @@ def trend_table(data: pd.DataFrame, roller_radius_mm: float) -> list[tuple[str, 
     rows.append(("Phi peaks where the roller's bottom point is at rest (U = -omega R)",
                  f"max Phi {peak.porosity_pct:.1f} % at U = {peak.U_mm_s:g} mm/s, omega = {peak.omega_rad_s:g} rad/s "
                  f"(bottom speed {peak.U_mm_s + peak.omega_rad_s * roller_radius_mm:+.0f} mm/s); mean Phi where "
-                 f"bottom speed within 25 mm/s: {at_rest.porosity_pct.mean():.1f} %, elsewhere {mean.porosity_pct.mean():.1f} %",
+                 f"bottom speed within 25 mm/s: {at_rest.porosity_pct.mean():.1f} %, "
+                 f"elsewhere {mean.porosity_pct.mean():.1f} %",
                  "yes" if abs(peak.U_mm_s + peak.omega_rad_s * roller_radius_mm) <= 25 else "no"))
     rising_phi = np.mean([np.all(np.diff(por[w].to_numpy()) > 0) for w in por.columns])
     rows.append(("Phi increases monotonically with U at constant omega",
