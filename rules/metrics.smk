@@ -24,9 +24,11 @@ rule dataset:
         health=expand(f"{OUT}/runs/{{run}}/health.json", run=RUNS),
         benchmarks=expand(f"{BENCH}/spread/{{run}}.tsv", run=RUNS),
     output:
-        report(f"{OUT}/dataset.csv", category="Dataset"),
+        report(f"{OUT}/dataset.csv", caption="../report/dataset.rst", category="Dataset"),
     log:
         f"{LOGS}/dataset.log",
+    benchmark:
+        f"{BENCH}/dataset.tsv"
     script:
         "../scripts/dataset.py"
 
@@ -36,7 +38,7 @@ rule trends:
     input:
         rules.dataset.output[0],
     output:
-        report(f"{OUT}/trends.md", category="Dataset"),
+        report(f"{OUT}/trends.md", caption="../report/trends.rst", category="Dataset"),
     log:
         f"{LOGS}/trends.log",
     script:
@@ -52,6 +54,8 @@ rule deposit_profile:
         png=report(f"{OUT}/deposit_profile.png", caption="../report/deposit_profile.rst", category="Dataset"),
     log:
         f"{LOGS}/deposit_profile.log",
+    benchmark:
+        f"{BENCH}/deposit_profile.tsv"
     params:
         level=LEVEL,
         runs=PROFILE_RUNS,

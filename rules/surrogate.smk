@@ -4,7 +4,7 @@ rule noise_floor:
         dataset=rules.dataset.output[0],
     output:
         csv=f"{OUT}/surrogate/noise_floor.csv",
-        md=report(f"{OUT}/surrogate/noise_floor.md", category="Surrogate"),
+        md=report(f"{OUT}/surrogate/noise_floor.md", caption="../report/noise_floor.rst", category="Surrogate"),
     log:
         f"{LOGS}/noise_floor.log",
     benchmark:
@@ -21,7 +21,7 @@ rule model_choice:
         dataset=rules.dataset.output[0],
     output:
         csv=f"{OUT}/surrogate/model_choice.csv",
-        md=report(f"{OUT}/surrogate/model_choice.md", category="Surrogate"),
+        md=report(f"{OUT}/surrogate/model_choice.md", caption="../report/model_choice.rst", category="Surrogate"),
     log:
         f"{LOGS}/model_choice.log",
     benchmark:
@@ -41,9 +41,9 @@ rule surrogate:
         choice=rules.model_choice.output.csv,
     output:
         model=f"{OUT}/surrogate/model.joblib",
-        scores=report(f"{OUT}/surrogate/scores.json", category="Surrogate"),
+        scores=report(f"{OUT}/surrogate/scores.json", caption="../report/scores.rst", category="Surrogate"),
         split=f"{OUT}/surrogate/split.csv",
-        grid=report(f"{OUT}/surrogate/grid.csv", category="Surrogate"),
+        grid=report(f"{OUT}/surrogate/grid.csv", caption="../report/grid.rst", category="Surrogate"),
     log:
         f"{LOGS}/surrogate.log",
     benchmark:
