@@ -12,27 +12,24 @@ import time
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 
 from tests.test_config import ROOT
 
 pytestmark = pytest.mark.xdist_group("workflow")
 
-OMEGAS = [-10, 0, 5]  # the fed smoke pile lasts under forward rolling too
-FIRST_U = [85, 100]
-#: 4 x the smoke scene's seed-to-seed standard deviation at U = 100 mm/s, omega = 0
-#: (4 heap packings, benchmarks/measured/noise_smoke.csv), in the dataset's units
+TEST_CONFIG = yaml.safe_load((ROOT / ".test/config.yaml").read_text())
+OMEGAS = TEST_CONFIG["sweep"]["omega_rad_s"]
+FIRST_U = TEST_CONFIG["sweep"]["U_mm_s"]
 SEED_SPREAD = {"mass_g": 4 * 7e-5, "throughput_mm2_s": 4 * 0.91, "roughness_um": 4 * 3.8, "porosity_pct": 4 * 0.96}
 
 
-# a surrogate small enough for the smoke runs
-SMALL_SURROGATE = 'surrogate={"n_test": 2, "cv_folds": 3, "cv_repeats": 1, "mlp_members": 2}'
-
-
 def snakemake_cmd(workdir, U, *extra):
-    sweep = json.dumps({"U_mm_s": U, "omega_rad_s": OMEGAS, "replicates": 1})
+    """Snakemake on the CI's config (.test/config.yaml) in ``workdir``, at speeds ``U`` (mm/s)."""
+    sweep = json.dumps({"U_mm_s": U})
     return [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-d", str(workdir),
-            "--configfile", str(ROOT / "config.yaml"), "--cores", "2", "--rerun-incomplete",
-            "--config", "level=smoke", f"sweep={sweep}", SMALL_SURROGATE, *extra]
+            "--configfile", str(ROOT / "config.yaml"), str(ROOT / ".test/config.yaml"), "--cores", "2",
+            "--rerun-incomplete", "--config", f"sweep={sweep}", *extra]
 
 
 @pytest.fixture(scope="module")
@@ -156,11 +153,8 @@ def test_spread_on_two_mpi_ranks_through_the_workflow_matches_one_rank(workflow)
     seed-to-seed spread (benchmarks/measured/noise_smoke.md)."""
     run = workflow / "results/smoke/runs/U100_w0_r0"
     one = json.loads((run / "metrics.json").read_text())
-    sweep = json.dumps({"U_mm_s": FIRST_U, "omega_rad_s": OMEGAS, "replicates": 1})
-    cmd = [sys.executable, "-m", "snakemake", "results/smoke/runs/U100_w0_r0/metrics.json",
-           "-s", str(ROOT / "Snakefile"), "-d", str(workflow), "--configfile", str(ROOT / "config.yaml"),
-           "--cores", "2", "--forcerun", "spread", "--config", "level=smoke", f"sweep={sweep}",
-           SMALL_SURROGATE, 'fidelity={"smoke": {"mpi_ranks": 2}}']
+    cmd = [*snakemake_cmd(workflow, FIRST_U, 'fidelity={"smoke": {"mpi_ranks": 2}}'), "--forcerun", "spread",
+           "--", "results/smoke/runs/U100_w0_r0/metrics.json"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "rule settle:" not in proc.stderr + proc.stdout         # the same settled heap
