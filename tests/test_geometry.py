@@ -114,3 +114,40 @@ def test_paper_level_substrate_is_made_with_peaks_clipped_below_the_roller(confi
     assert clipped.vertices[:, 2].max() == pytest.approx(0.9 * s.roller_gap)
     assert np.mean(clipped.vertices[:, 2] >= 0.9 * s.roller_gap) < 1e-3
     assert geometry.substrate_rms(clipped, s.sampling_region[:2])[1] == pytest.approx(79e-6, rel=0.01)
+
+
+def _stl_triangles(path):
+    """Triangles (n, 3, 3) [m] of an ASCII STL, read with numpy alone."""
+    lines = [line.split()[1:] for line in path.read_text().splitlines() if line.lstrip().startswith("vertex")]
+    return np.asarray(lines, float).reshape(-1, 3, 3)
+
+
+def test_rough_field_has_its_sq_and_correlation_length_measured_from_the_stl(tmp_path):
+    """Sq and the correlation length measured from the written STL, independently of the
+    generator: Sq as the area-weighted RMS of the piecewise-linear surface (a linear
+    triangle's mean z^2 is (sum z_i^2 + sum_{i<j} z_i z_j) / 6), and lc as the e-folding
+    length of the heights' autocorrelation along x (Gaussian field: exp(-r^2/lc^2))."""
+    lc, sq, spacing = 300e-6, 79e-6, 50e-6
+    mesh = geometry.rough_substrate((0.0, 0.012), 0.012, spacing, lc, sq, seed=5)
+    path = geometry.write_stl(mesh, tmp_path / "field.stl")
+    tri = _stl_triangles(path)
+    z = tri[:, :, 2]
+    (ax, ay), (bx, by) = (tri[:, 1, :2] - tri[:, 0, :2]).T, (tri[:, 2, :2] - tri[:, 0, :2]).T
+    area = 0.5 * np.abs(ax * by - ay * bx)
+    mean_z2 = ((z ** 2).sum(1) + z[:, 0] * z[:, 1] + z[:, 1] * z[:, 2] + z[:, 0] * z[:, 2]) / 6
+    mean_z = z.mean(1)
+    assert np.sqrt(np.sum(area * mean_z2) / area.sum() - (np.sum(area * mean_z) / area.sum()) ** 2) == \
+        pytest.approx(sq, rel=0.02)
+    # the nodes' heights on their grid, from the vertices
+    v = np.unique(tri.reshape(-1, 3).round(12), axis=0)
+    xs, ys = np.unique(v[:, 0]), np.unique(v[:, 1])
+    heights = np.full((len(xs), len(ys)), np.nan)
+    heights[np.searchsorted(xs, v[:, 0]), np.searchsorted(ys, v[:, 1])] = v[:, 2]
+    heights = heights[:, :-1] - heights[:, :-1].mean()       # the last row repeats the first (periodic)
+    spectrum = np.abs(np.fft.fft(heights, axis=0)) ** 2
+    acf = np.fft.ifft(spectrum, axis=0).real.mean(axis=1)
+    acf /= acf[0]
+    lag = np.arange(len(acf)) * spacing
+    k = np.argmax(acf < np.exp(-1))
+    e_fold = lag[k - 1] + (np.exp(-1) - acf[k - 1]) / (acf[k] - acf[k - 1]) * spacing
+    assert e_fold == pytest.approx(lc, rel=0.1)
