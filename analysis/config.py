@@ -56,7 +56,7 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     source : path or dict
         ``config.yaml`` or an already-parsed mapping (e.g. Snakemake's ``config``).
     base_dir : path, optional
-        Folder that a relative ``substrate.stl`` is resolved against; defaults to
+        Folder that a relative ``substrate.mesh`` is resolved against; defaults to
         the config file's folder, or the working directory for a mapping.
     """
     if isinstance(source, (str, Path)):
@@ -104,9 +104,9 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
     if step["rayleigh_fraction"] > step["max_rayleigh_fraction"]:
         _fail("timestep.rayleigh_fraction", step["rayleigh_fraction"],
               f"exceeds timestep.max_rayleigh_fraction = {step['max_rayleigh_fraction']}")
-    stl = config["substrate"]["stl"]
-    if stl is not None and not (base_dir / stl).is_file():
-        _fail("substrate.stl", stl, "file not found")
+    mesh = config["substrate"]["mesh"]
+    if mesh is not None and not (base_dir / mesh).is_file():
+        _fail("substrate.mesh", mesh, "file not found")
     for name, lvl in config["fidelity"].items():
         width = lvl.get("sampling_width_mm", lvl["strip_width_mm"])
         if width > lvl["strip_width_mm"]:
@@ -266,7 +266,7 @@ def scene(config: dict, level: str | None = None) -> Scene:
         checkpoints_per_run=lvl.get("checkpoints_per_run", 0),
         feed_pile_mass=feed_pile_mass, feed_length=feed_len,
         substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
-                   "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "stl": sub["stl"]},
+                   "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "mesh": sub["mesh"]},
         rough_x=(sample_x0 - 0.5 * mm, sample_x1 + 0.5 * mm),
         box=box,
         substrate_x=box[:2],

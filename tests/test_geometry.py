@@ -81,7 +81,7 @@ def test_users_stl_replaces_the_generated_substrate(config, tmp_path):
     z = 40e-6 * np.sin(2 * np.pi * x / 1e-3)[:, None] * np.ones(len(y))
     geometry.write_stl(geometry.height_field_mesh(x, y, z), tmp_path / "mine.stl")
     mine = yaml.safe_load((ROOT / "config.yaml").read_text())
-    mine["substrate"]["stl"] = str(tmp_path / "mine.stl")
+    mine["substrate"]["mesh"] = str(tmp_path / "mine.stl")
     summary = make_geometry(load_config(mine), "smoke", tmp_path / "out")
     assert summary["substrate_sq_m"] == pytest.approx(40e-6 / np.sqrt(2), rel=0.02)
 
@@ -90,8 +90,8 @@ def test_users_stl_too_small_for_the_bed_is_refused(config, tmp_path):
     flat = geometry.height_field_mesh(np.linspace(0, 1e-3, 3), np.linspace(0, 1e-3, 3), np.zeros((3, 3)))
     geometry.write_stl(flat, tmp_path / "small.stl")
     mine = yaml.safe_load((ROOT / "config.yaml").read_text())
-    mine["substrate"]["stl"] = str(tmp_path / "small.stl")
-    with pytest.raises(ConfigError, match="substrate.stl"):
+    mine["substrate"]["mesh"] = str(tmp_path / "small.stl")
+    with pytest.raises(ConfigError, match="substrate.mesh"):
         make_geometry(load_config(mine), "smoke", tmp_path / "out")
 
 
@@ -151,3 +151,33 @@ def test_rough_field_has_its_sq_and_correlation_length_measured_from_the_stl(tmp
     k = np.argmax(acf < np.exp(-1))
     e_fold = lag[k - 1] + (np.exp(-1) - acf[k - 1]) / (acf[k] - acf[k - 1]) * spacing
     assert e_fold == pytest.approx(lc, rel=0.1)
+
+
+def test_users_surface_in_any_meshio_format_replaces_the_generated_substrate(config, tmp_path):
+    """substrate.mesh may be a PLY or VTK as well as an STL (meshio reads it); the
+    geometry step writes it as substrate.stl for LIGGGHTS, unchanged."""
+    import meshio
+    s = scene(config, "smoke")
+    x = np.arange(s.box[0], s.box[1] + 2e-5, 2e-5)
+    y = np.linspace(0, s.strip_width, 11)
+    z = 40e-6 * np.sin(2 * np.pi * x / 1e-3)[:, None] * np.ones(len(y))
+    field = geometry.height_field_mesh(x, y, z)
+    for name in ("mine.ply", "mine.vtk"):
+        meshio.write(tmp_path / name, meshio.Mesh(field.vertices, [("triangle", field.faces)]))
+        mine = yaml.safe_load((ROOT / "config.yaml").read_text())
+        mine["substrate"]["mesh"] = str(tmp_path / name)
+        summary = make_geometry(load_config(mine), "smoke", tmp_path / name.replace(".", "_"))
+        assert summary["substrate_sq_m"] == pytest.approx(40e-6 / np.sqrt(2), rel=0.02), name
+        written = geometry.load_stl(tmp_path / name.replace(".", "_") / "substrate.stl")
+        assert len(written.faces) == len(field.faces)
+        assert np.allclose(written.vertices[written.faces], field.vertices[field.faces], atol=1e-9)
+
+
+def test_a_surface_without_triangles_is_refused_by_key(config, tmp_path):
+    import meshio
+    meshio.write(tmp_path / "points.vtk", meshio.Mesh(np.random.default_rng(0).random((5, 3)),
+                                                         [("vertex", np.arange(5)[:, None])]))
+    mine = yaml.safe_load((ROOT / "config.yaml").read_text())
+    mine["substrate"]["mesh"] = str(tmp_path / "points.vtk")
+    with pytest.raises(ConfigError, match="substrate.mesh.*no triangles"):
+        make_geometry(load_config(mine), "smoke", tmp_path / "out")

@@ -75,16 +75,19 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
     (its lateral surface, what the periodic strip loads) into ``outdir``.
 
     The generated substrate is realisation :func:`substrate_seed` of ``replicate``.
-    A user's STL (``substrate.stl`` in the config, metres) replaces it for every
+    A user's surface (``substrate.mesh`` in the config, any format meshio reads, metres) replaces it for every
     replicate; it must cover the bed, and no substrate peak may reach the roller.
     """
     s, out = scene(config, level), Path(outdir)
-    if s.substrate["stl"]:
-        substrate = geometry.load_stl(base_dir / s.substrate["stl"])
+    if s.substrate["mesh"]:
+        try:
+            substrate = geometry.load_surface(base_dir / s.substrate["mesh"])
+        except ValueError as err:
+            raise ConfigError(f"config key 'substrate.mesh': {err}") from None
         lo, hi = substrate.bounds
         need = (s.substrate_x[0], s.substrate_x[1], 0.0, s.strip_width)
         if lo[0] > need[0] or hi[0] < need[1] or lo[1] > 1e-9 or hi[1] < s.strip_width - 1e-9:
-            raise ConfigError(f"config key 'substrate.stl' = {s.substrate['stl']!r}: "
+            raise ConfigError(f"config key 'substrate.mesh' = {s.substrate['mesh']!r}: "
                               f"covers x {lo[0]:.4g}..{hi[0]:.4g} m,"
                               f" y {lo[1]:.4g}..{hi[1]:.4g} m; the bed needs x {need[0]:.4g}..{need[1]:.4g},"
                               f" y 0..{s.strip_width:.4g} m")
@@ -112,7 +115,7 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
              "roller_shell": geometry.write_stl(
                  geometry.roller(2 * s.roller_radius, s.strip_width, s.roller_facets, capped=False),
                  out / "roller_shell.stl")}
-    return {**{k: str(v) for k, v in paths.items()}, "substrate_seed": None if s.substrate["stl"] else
+    return {**{k: str(v) for k, v in paths.items()}, "substrate_seed": None if s.substrate["mesh"] else
             substrate_seed(config, replicate), "substrate_mean_m": mean, "substrate_sq_m": sq,
             "substrate_peak_m": float(peak), "substrate_triangles": len(substrate.faces)}
 
