@@ -187,3 +187,20 @@ def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
     assert meta["split"]["test"] == split.index[split["set"] == "test"].tolist()
     log = (tmp_path / "rule.log").read_text()
     assert "converged" in log and "chosen by cross-validation: gp" in log
+
+
+def test_hybrid_indices_against_hand_computed_values():
+    """Figure 10's indices for three settings worked by hand: throughput index
+    Q_s/max(Q_s) * M_s/max(M_s), defect index R_q/max(R_q) * Phi/max(Phi)."""
+    frame = pd.DataFrame({"mass_g": [0.010, 0.020, 0.005], "throughput_mm2_s": [20.0, 10.0, 40.0],
+                          "roughness_um": [80.0, 100.0, 120.0], "porosity_pct": [60.0, 30.0, 45.0]})
+    throughput, defect = hybrid_indices(frame)
+    # maxima: M_s 0.020, Q_s 40, R_q 120, Phi 60
+    assert throughput == pytest.approx([0.5 * 0.5, 0.25 * 1.0, 1.0 * 0.25])
+    assert defect == pytest.approx([(80 / 120) * 1.0, (100 / 120) * 0.5, 1.0 * 0.75])
+    # against the maxima of a whole map instead of this frame's
+    maxima = {"mass_g": 0.04, "throughput_mm2_s": 80.0, "roughness_um": 160.0, "porosity_pct": 90.0}
+    throughput, defect = hybrid_indices(frame.iloc[:1], maxima)
+    assert throughput == pytest.approx([0.25 * 0.25]) and defect == pytest.approx([0.5 * (60 / 90)])
+    with pytest.raises(ValueError, match="non-positive maximum: mass_g"):
+        hybrid_indices(frame, {**maxima, "mass_g": 0.0})
