@@ -17,7 +17,7 @@ from pathlib import Path
 import jsonschema
 import yaml
 
-from analysis.dem.physics import INSERTION_SOLID_FRACTION, feed_length, number_mean_volume, psd_classes, rayleigh_time
+from analysis.physics import INSERTION_SOLID_FRACTION, feed_length, number_mean_volume, psd_classes, rayleigh_time
 
 #: The project folder: config.yaml, templates/, Snakefile (the package is installed in place).
 PROJECT_DIR = Path(__file__).resolve().parents[1]

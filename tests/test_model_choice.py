@@ -9,10 +9,10 @@ import pandas as pd
 import pytest
 from conftest import synthetic_dataset, synthetic_metrics
 
-from analysis.metrics.dataset import METRICS
+from analysis.metrics.dataset import METRICS, point_groups, point_means
 from analysis.metrics.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown
 from analysis.surrogate.candidates import GPSurrogate, MLPEnsemble, TreeEnsemble, make_candidate
-from analysis.surrogate.data import inputs_of, point_folds, point_groups, point_means, split_runs, targets_of
+from analysis.surrogate.data import inputs_of, point_folds, split_runs, targets_of
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import predict_grid, predict_with_std
 from analysis.surrogate.recommend import main, recommend

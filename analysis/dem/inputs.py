@@ -11,7 +11,7 @@ from math import ceil, sqrt
 import numpy as np
 
 from analysis.config import Scene
-from analysis.dem.physics import liggghts_seeds
+from analysis.physics import liggghts_seeds
 
 THERMO_EVERY = 1000
 

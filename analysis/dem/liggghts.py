@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.config import PROJECT_DIR
-from analysis.dem.physics import is_prime
+from analysis.physics import is_prime
 
 TEMPLATES = PROJECT_DIR / "templates"
 

@@ -48,9 +48,9 @@ from analysis.dem.inputs import (
     travel_segments,
 )
 from analysis.dem.liggghts import LiggghtsError, render, run
-from analysis.dem.physics import liggghts_seeds, roller_motion
 from analysis.io import write_json
 from analysis.metrics.dump import read_dump
+from analysis.physics import liggghts_seeds, roller_motion
 
 #: The generated substrate's peaks are clipped at this fraction of the roller's
 #: gap (3.4 Sq at the configured 300 um gap and Sq 79 um): otherwise the paper

@@ -20,8 +20,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.io import atomic_path
-from analysis.metrics.dataset import METRICS
-from analysis.surrogate.data import INPUTS, point_groups, point_means
+from analysis.metrics.dataset import INPUTS, METRICS, point_groups, point_means
 
 #: Row label of the pooled summary in the noise-floor table.
 POOLED = "pooled"

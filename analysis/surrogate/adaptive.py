@@ -59,9 +59,9 @@ from scipy.stats import qmc
 
 from analysis.config import PROJECT_DIR, ConfigError, load_config, run_name
 from analysis.io import atomic_path
-from analysis.metrics.dataset import METRICS
+from analysis.metrics.dataset import INPUTS, METRICS
 from analysis.surrogate.candidates import GPSurrogate
-from analysis.surrogate.data import INPUTS, inputs_of, targets_of
+from analysis.surrogate.data import inputs_of, targets_of
 from analysis.surrogate.persistence import save_surrogate
 
 ROOT = PROJECT_DIR

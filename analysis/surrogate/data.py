@@ -9,32 +9,7 @@ import numpy as np
 import pandas as pd
 from sklearn.model_selection import GroupKFold, GroupShuffleSplit, LeaveOneGroupOut
 
-from analysis.metrics.dataset import METRICS
-
-#: Input columns and their units.
-INPUTS = {"U_mm_s": "mm/s", "omega_rad_s": "rad/s"}
-
-
-
-def point_groups(df):
-    """Label of each run's (U, omega) point, numbered in order of first appearance.
-
-    Replicates (runs at the same speeds from different heap packings) share a
-    label; with one run per point the labels are ``0 .. n-1`` in row order.
-
-    Parameters
-    ----------
-    df : pandas.DataFrame
-        Has ``U_mm_s`` (mm/s) and ``omega_rad_s`` (rad/s).
-
-    Returns
-    -------
-    numpy.ndarray of int, shape (n_runs,)
-    """
-    keys = df[list(INPUTS)].to_numpy(float)
-    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    rank = np.argsort(np.argsort(first))
-    return rank[inverse.ravel()]
+from analysis.metrics.dataset import INPUTS, METRICS, point_groups
 
 
 def split_runs(df, n_test, seed):
@@ -86,42 +61,6 @@ def point_folds(df, folds, seed):
     splitter = (LeaveOneGroupOut() if int(folds) == n
                 else GroupKFold(int(folds), shuffle=True, random_state=int(seed)))
     return list(splitter.split(groups, groups=groups))
-
-
-def point_means(df, split=None):
-    """One row per (U, omega) point: the replicate mean, std and count of each metric.
-
-    Parameters
-    ----------
-    df : pandas.DataFrame
-        The runs (speeds and the four metrics).
-    split : (array of int, array of int), optional
-        Row positions of the training and test runs (by point, see
-        :func:`split_runs`); mapped to point positions.
-
-    Returns
-    -------
-    points : pandas.DataFrame
-        In order of first appearance: ``U_mm_s``, ``omega_rad_s``,
-        ``n_replicates``, the metric means (their column names) and
-        ``<metric>_sd`` (seed-to-seed standard deviation, ddof 1; 0 for a
-        single run), in the metrics' units.
-    point_split : (array of int, array of int) or None
-        Point positions of the training and test points.
-    """
-    groups = point_groups(df)
-    frame = df[list(INPUTS) + list(METRICS)].assign(_point=groups)
-    grouped = frame.groupby("_point", sort=True)
-    points = grouped[list(INPUTS) + list(METRICS)].mean().reset_index(drop=True)
-    points.insert(2, "n_replicates", grouped.size().to_numpy())
-    sd = grouped[list(METRICS)].std(ddof=1).fillna(0.0).reset_index(drop=True)
-    for m in METRICS:
-        points[f"{m}_sd"] = sd[m].to_numpy()
-    if split is None:
-        return points, None
-    test_points = np.unique(groups[np.asarray(split[1], int)])
-    is_test = np.isin(np.arange(len(points)), test_points)
-    return points, (np.flatnonzero(~is_test), np.flatnonzero(is_test))
 
 
 def split_table(df, train_idx, test_idx):

@@ -49,16 +49,8 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
-from analysis.surrogate.data import (
-    INPUTS,
-    _check_dataset,
-    _names,
-    inputs_of,
-    point_folds,
-    point_groups,
-    split_runs,
-    targets_of,
-)
+from analysis.metrics.dataset import INPUTS, point_groups
+from analysis.surrogate.data import _check_dataset, _names, inputs_of, point_folds, split_runs, targets_of
 from analysis.surrogate.scores import _MAPE_NOTE, R_TARGET, _score_text, regression_scores
 
 _MODEL_KEYS = ("hidden_units", "activation", "alpha", "solver",
@@ -78,8 +70,9 @@ class RestartedMLP(RegressorMixin, BaseEstimator):
 
     Parameters
     ----------
-    mlp : sklearn.neural_network.MLPRegressor
-        The network; its ``random_state`` (int) seeds the first restart.
+    mlp : sklearn.neural_network.MLPRegressor, optional
+        The network (default: ``MLPRegressor()``); its ``random_state`` (an int,
+        or None for 0) seeds the first restart.
     n_init : int
         Number of initialisations (1 = a plain MLPRegressor fit).
 
@@ -106,9 +99,11 @@ class RestartedMLP(RegressorMixin, BaseEstimator):
         by 200 units), and with other jobs on the cores OpenBLAS's threads
         turned a 0.5 s fit into 8 s.
         """
+        mlp = MLPRegressor() if self.mlp is None else self.mlp
+        seed = 0 if mlp.random_state is None else int(mlp.random_state)
         fits = []
         for k in range(int(self.n_init)):
-            net = clone(self.mlp).set_params(random_state=int(self.mlp.random_state) + k)
+            net = clone(mlp).set_params(random_state=seed + k)
             with _convergence_messages() as messages, threadpool_limits(1, user_api="blas"):
                 net.fit(X, y)
             fits.append((net.loss_, k, net, messages))

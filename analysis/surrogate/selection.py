@@ -37,9 +37,9 @@ import pandas as pd
 from joblib import Parallel, delayed
 
 from analysis.io import atomic_path
-from analysis.metrics.dataset import METRICS
+from analysis.metrics.dataset import METRICS, point_groups
 from analysis.surrogate.candidates import CANDIDATES, GPSurrogate, make_candidate
-from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, point_groups, targets_of
+from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, targets_of
 from analysis.surrogate.network import _convergence_messages
 from analysis.surrogate.scores import _num, regression_scores
 

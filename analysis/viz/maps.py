@@ -26,8 +26,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from analysis.io import atomic_path
-from analysis.metrics.dataset import METRICS
-from analysis.surrogate.data import INPUTS, inputs_of, point_means
+from analysis.metrics.dataset import INPUTS, METRICS, point_means
+from analysis.surrogate.data import inputs_of
 from analysis.surrogate.predict import (
     hybrid_index_std,
     hybrid_indices,
