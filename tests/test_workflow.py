@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from PIL import Image
 
 from tests.test_config import ROOT
 
@@ -96,11 +97,24 @@ def test_surrogate_scores_maps_and_grid_are_made(workflow):
     for part in ("train", "test", "cv"):
         assert set(scores[part]) == {"mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"}
     assert scores["split"]["n_test"] == 2 and scores["split"]["n_train"] == 4
+    for part in ("train", "test", "cv"):
+        assert all(-1 <= s["R"] <= 1 for s in scores[part].values() if s["R"] is not None), part
     grid = pd.read_csv(out / "surrogate/grid.csv")
     assert {"U_mm_s", "omega_rad_s", "throughput_index", "defect_index"} <= set(grid.columns)
+    # the grid spans the swept speeds; the indices are products of two ratios to the grid's maxima
+    assert (grid.U_mm_s.min(), grid.U_mm_s.max()) == (min(FIRST_U), max(FIRST_U))
+    assert (grid.omega_rad_s.min(), grid.omega_rad_s.max()) == (min(OMEGAS), max(OMEGAS))
+    for index in ("throughput_index", "defect_index"):
+        assert grid[index].between(0, 1 + 1e-9).all() and grid[index].max() > 0.5, index
+    # the predicted metrics stay within a factor of the simulated ones
+    data = pd.read_csv(out / "dataset.csv")
+    for m in ("mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"):
+        assert data[m].min() / 3 < grid[m].median() < 3 * data[m].max(), m
     for name in ["process_map", "mass_g_surface", "porosity_pct_parity"]:
-        assert (out / "maps" / f"{name}.png").stat().st_size > 5000
-        assert (out / "maps" / f"{name}.svg").exists()
+        with Image.open(out / "maps" / f"{name}.png") as png:
+            assert png.size[0] >= 600 and png.size[1] >= 400, (name, png.size)
+            assert len(png.convert("L").getcolors(1 << 16) or []) > 50, name   # a drawing, not a blank
+        assert "<svg" in (out / "maps" / f"{name}.svg").read_text()[:2000]
     # Figure 4's top views: fastest U, the swept omegas nearest -5, 0 and +5 rad/s
     assert {p.stem for p in out.glob("top_views/*.png")} == {"U100_w-10_r0", "U100_w0_r0", "U100_w5_r0"}
     assert len(list(out.glob("runs/*/final.vtp"))) == len(FIRST_U) * len(OMEGAS)
