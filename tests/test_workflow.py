@@ -105,7 +105,7 @@ def test_surrogate_scores_maps_and_grid_are_made(workflow):
     assert (grid.U_mm_s.min(), grid.U_mm_s.max()) == (min(FIRST_U), max(FIRST_U))
     assert (grid.omega_rad_s.min(), grid.omega_rad_s.max()) == (min(OMEGAS), max(OMEGAS))
     for index in ("throughput_index", "defect_index"):
-        assert grid[index].between(0, 1 + 1e-9).all() and grid[index].max() > 0.5, index
+        assert grid[index].between(0, 1 + 1e-9).all() and grid[index].max() > 0.1, index
     # the predicted metrics stay within a factor of the simulated ones
     data = pd.read_csv(out / "dataset.csv")
     for m in ("mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"):
