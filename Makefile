@@ -1,6 +1,6 @@
 # spreadmap: the two commands of the README.
 #   make map    set everything up, run the workflow at the `default` fidelity level
-#   make test   set everything up, run the test suite
+#   make test   set everything up, run the linters and the test suite
 # Both install what is missing (LIGGGHTS from Debian's packages, a virtual
 # environment from requirements.txt) and are safe to repeat.
 
@@ -23,6 +23,7 @@ map: setup
 	@echo "Process maps: results/$(LEVEL)/maps/  report: results/$(LEVEL)/report.html"
 
 test: setup
+	PYTHON=$(PYTHON) .ci/lint
 	$(PYTHON) -m pytest -n 2 --dist loadgroup -q tests
 
 setup: system-packages $(VENV)/.installed
@@ -35,9 +36,10 @@ system-packages:
 	fi
 	@command -v liggghts >/dev/null || { echo "error: liggghts is not on PATH after installing"; exit 1; }
 
-$(VENV)/.installed: requirements.txt
+$(VENV)/.installed: requirements.txt pyproject.toml
 	python3 -m venv $(VENV)
 	$(VENV)/bin/pip install --quiet --disable-pip-version-check -r requirements.txt  # with bytecode: PYTHONDONTWRITEBYTECODE may be set, and every job would compile its imports
+	$(VENV)/bin/pip install --quiet --disable-pip-version-check --no-deps -e .  # the `analysis` package itself
 	touch $@
 
 clean:

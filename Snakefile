@@ -1,19 +1,20 @@
 # spreadmap: DEM spreading simulations (LIGGGHTS) -> layer metrics -> surrogate -> process maps.
 # The method is the paper's spreading process maps (Figures 6-10); see README.md.
-import sys
+from snakemake.utils import min_version
 
-from snakemake.utils import min_version, validate
+# the analysis package is installed by the README's setup (pip install -e .)
+from analysis.config import coerce_cli_values
 
 min_version("9.0")
-sys.path.insert(0, workflow.basedir)
-from analysis.config import coerce_cli_values  # noqa: E402
 
 
 configfile: "config.yaml"
 
 
 config.update(coerce_cli_values(config))  # --config values arrive as strings
-validate(config, "analysis/schemas/config.schema.yaml")
+
+
+# rules/common.smk checks the config once, against analysis/schemas/config.schema.yaml and across keys
 
 
 include: "rules/common.smk"
@@ -25,7 +26,18 @@ include: "rules/maps.smk"
 
 
 # On a cluster (profiles/slurm) only settle and spread are submitted; the rest is light.
-localrules: all, geometry, layer_metrics, dataset, deposit_profile, trends, noise_floor, model_choice, surrogate, maps, top_view
+localrules:
+    all,
+    geometry,
+    layer_metrics,
+    dataset,
+    deposit_profile,
+    trends,
+    noise_floor,
+    model_choice,
+    surrogate,
+    maps,
+    top_view,
 
 
 rule all:

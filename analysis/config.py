@@ -11,20 +11,17 @@ import copy
 import hashlib
 import json
 from dataclasses import dataclass
-from math import erf, pi, sqrt
+from math import sqrt
 from pathlib import Path
 
 import jsonschema
-import numpy as np
 import yaml
 
+from analysis.physics import INSERTION_SOLID_FRACTION, feed_length, number_mean_volume, psd_classes, rayleigh_time
+
+#: The project folder: config.yaml, templates/, Snakefile (the package is installed in place).
+PROJECT_DIR = Path(__file__).resolve().parents[1]
 SCHEMA_PATH = Path(__file__).with_name("schemas") / "config.schema.yaml"
-#: Solid fraction assumed when sizing the insertion region of the heap.
-INSERTION_SOLID_FRACTION = 0.2
-#: Solid fraction of a loose pile: sizes the feed zone ahead of the roller.
-PILE_SOLID_FRACTION = 0.55
-#: The feed zone holds this many times the fed pile's bulk volume (room for its slope and toe).
-FEED_ZONE_ROOM = 2.0
 
 
 class ConfigError(ValueError):
@@ -59,7 +56,7 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     source : path or dict
         ``config.yaml`` or an already-parsed mapping (e.g. Snakemake's ``config``).
     base_dir : path, optional
-        Folder that a relative ``substrate.stl`` is resolved against; defaults to
+        Folder that a relative ``substrate.mesh`` is resolved against; defaults to
         the config file's folder, or the working directory for a mapping.
     """
     if isinstance(source, (str, Path)):
@@ -107,9 +104,9 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
     if step["rayleigh_fraction"] > step["max_rayleigh_fraction"]:
         _fail("timestep.rayleigh_fraction", step["rayleigh_fraction"],
               f"exceeds timestep.max_rayleigh_fraction = {step['max_rayleigh_fraction']}")
-    stl = config["substrate"]["stl"]
-    if stl is not None and not (base_dir / stl).is_file():
-        _fail("substrate.stl", stl, "file not found")
+    mesh = config["substrate"]["mesh"]
+    if mesh is not None and not (base_dir / mesh).is_file():
+        _fail("substrate.mesh", mesh, "file not found")
     for name, lvl in config["fidelity"].items():
         width = lvl.get("sampling_width_mm", lvl["strip_width_mm"])
         if width > lvl["strip_width_mm"]:
@@ -139,6 +136,8 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
 
 #: Fidelity keys that say how a run is executed, not what it computes.
 EXECUTION_KEYS = ("mpi_ranks", "runtime_min", "mem_mb_per_rank", "checkpoints_per_run", "profilometer_lines")
+
+
 #: Top-level sections whose values a settle or spread computes with.
 SIMULATION_SECTIONS = ("random_seed", "material", "psd", "roller", "substrate", "rest_rms_speed_mm_s", "timestep")
 
@@ -167,74 +166,6 @@ def design_points(config: dict) -> list[tuple[float, float]]:
         return [(float(U), float(w)) for U, w in sweep["points_mm_s_rad_s"]]
     return [(float(U), float(w)) for U in sweep["U_mm_s"] for w in sweep["omega_rad_s"]]
 
-
-# --------------------------------------------------------------------------
-# Physics helpers (SI)
-
-def rayleigh_time(radius: float, density: float, youngs_modulus: float, poisson_ratio: float) -> float:
-    """Rayleigh time [s] of a sphere, as LIGGGHTS' ``check/timestep/gran`` computes it.
-
-    ``dt_R = pi r sqrt(rho / G) / (0.1631 nu + 0.8766)``, ``G = E / (2 (1 + nu))``.
-    """
-    shear_modulus = youngs_modulus / (2.0 * (1.0 + poisson_ratio))
-    return pi * radius * sqrt(density / shear_modulus) / (0.1631 * poisson_ratio + 0.8766)
-
-
-def psd_classes(mean: float, std: float, dmin: float, dmax: float, n: int):
-    """Discretise a clipped Gaussian number distribution of diameters.
-
-    The range ``[dmin, dmax]`` is cut into ``n`` classes of equal width. A class
-    is represented by the diameter whose cube is the class's mean ``d^3``
-    (so each class keeps its mass), and weighted by its mass fraction.
-
-    Returns
-    -------
-    diameters : ndarray (n,), same unit as the inputs
-    mass_fractions : ndarray (n,), summing to 1
-    """
-    edges = np.linspace(dmin, dmax, n + 1)
-    fine = np.linspace(dmin, dmax, 200 * n + 1)
-    pdf = np.exp(-0.5 * ((fine - mean) / std) ** 2)
-    which = np.clip(np.searchsorted(edges, fine, side="right") - 1, 0, n - 1)
-    number = np.bincount(which, weights=pdf, minlength=n)
-    third_moment = np.bincount(which, weights=pdf * fine**3, minlength=n)
-    diameters = np.cbrt(third_moment / number)
-    return diameters, third_moment / third_moment.sum()
-
-
-def is_prime(n: int) -> bool:
-    return n > 1 and all(n % k for k in range(2, int(n**0.5) + 1))
-
-
-def liggghts_seeds(base: int, count: int) -> list[int]:
-    """``count`` distinct primes > 10000 derived from ``base`` (LIGGGHTS' seeds)."""
-    seeds, n = [], 10007 + 1009 * base
-    while len(seeds) < count:
-        if is_prime(n):
-            seeds.append(n)
-        n += 1
-    return seeds
-
-
-def roller_motion(speed: float, omega: float, radius: float) -> dict:
-    """The LIGGGHTS moves of the roller for the paper's sign convention.
-
-    The roller travels along +x at ``speed`` [m/s] and turns about its axis
-    (along y) so that its bottom point moves at ``speed + omega * radius`` along
-    +x: positive ``omega`` [rad/s] counter-rotates, negative rolls forward.
-    A right-handed rotation about +y moves the bottom point along -x, so the
-    rotation axis is ``-sign(omega) * y``. ``rotate`` takes a period, so
-    ``omega = 0`` has no rotation at all.
-    """
-    motion = {"velocity": (speed, 0.0, 0.0), "rotate": None,
-              "bottom_speed": speed + omega * radius}
-    if omega != 0:
-        motion["rotate"] = {"axis": (0.0, -float(np.sign(omega)), 0.0), "period": 2 * pi / abs(omega)}
-    return motion
-
-
-# --------------------------------------------------------------------------
-# The scene of one fidelity level
 
 @dataclass(frozen=True)
 class Scene:
@@ -280,30 +211,6 @@ class Scene:
     def mean_particle_mass(self) -> float:
         """Number-mean particle mass [kg]."""
         return self.density * number_mean_volume(self.diameters, self.mass_fractions)
-
-
-def number_mean_volume(diameters, mass_fractions) -> float:
-    """Number-mean particle volume [m^3] of size classes weighted by mass."""
-    return float(1.0 / np.sum(np.asarray(mass_fractions) / (pi / 6 * np.asarray(diameters) ** 3)))
-
-
-def feed_length(pile_per_width: float, density: float, radius: float, gap: float) -> float:
-    """Length [m] ahead of the roller axis of the feed zone for a pile of
-    ``pile_per_width`` [kg/m of strip width].
-
-    The zone is the wedge between the bed and the roller's front (height
-    ``gap + R - sqrt(R^2 - x^2)`` at ``x`` ahead of the axis); it is made long
-    enough to hold :data:`FEED_ZONE_ROOM` times the pile's bulk cross-section
-    (solid fraction :data:`PILE_SOLID_FRACTION`).
-    """
-    x = np.linspace(0.0, 0.95 * radius, 20001)
-    height = gap + radius - np.sqrt(radius**2 - x**2)
-    wedge = np.concatenate([[0.0], np.cumsum(np.diff(x) * (height[1:] + height[:-1]) / 2)])
-    need = FEED_ZONE_ROOM * pile_per_width / (density * PILE_SOLID_FRACTION)
-    if need > wedge[-1]:
-        raise ValueError(f"a pile of {pile_per_width * 1e3:.4g} mg/mm does not fit twice in the wedge ahead of the "
-                         f"roller (at most {wedge[-1] * density * PILE_SOLID_FRACTION / FEED_ZONE_ROOM * 1e3:.3g})")
-    return float(np.interp(need, wedge, x))
 
 
 def scene(config: dict, level: str | None = None) -> Scene:
@@ -359,7 +266,7 @@ def scene(config: dict, level: str | None = None) -> Scene:
         checkpoints_per_run=lvl.get("checkpoints_per_run", 0),
         feed_pile_mass=feed_pile_mass, feed_length=feed_len,
         substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
-                   "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "stl": sub["stl"]},
+                   "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "mesh": sub["mesh"]},
         rough_x=(sample_x0 - 0.5 * mm, sample_x1 + 0.5 * mm),
         box=box,
         substrate_x=box[:2],

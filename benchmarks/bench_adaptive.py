@@ -35,17 +35,16 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from analysis.config import load_config
+from analysis.metrics.dataset import METRICS
+from analysis.surrogate.adaptive import ACQUISITIONS, WorkflowEvaluator, initial_design, run_adaptive, sweep_bounds
+from analysis.surrogate.candidates import CANDIDATES, make_candidate
+from analysis.surrogate.data import inputs_of, targets_of
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-from analysis.adaptive import (ACQUISITIONS, WorkflowEvaluator, initial_design,  # noqa: E402
-                               run_adaptive, sweep_bounds)
-from analysis.config import load_config  # noqa: E402
-from analysis.model_choice import CANDIDATES, make_candidate  # noqa: E402
-from analysis.surrogate import METRICS, inputs_of, targets_of  # noqa: E402
 
 
 def cpu_model() -> str:

@@ -6,7 +6,7 @@ Usage (after ``make map``: it reads the default dataset, runs no DEM)::
 
 ``bench_adaptive.py`` measures designs on real DEM runs, but with one noise
 draw and 16 held-out runs its ranking of designs is itself noisy.  Here the
-truth is known: a Gaussian process (:class:`~analysis.model_choice.GPSurrogate`)
+truth is known: a Gaussian process (:class:`~analysis.surrogate.candidates.GPSurrogate`)
 fitted to the 45 grid runs gives a smooth surface with the DEM data's own
 length scales, and its white-noise term the run-to-run noise.  A design's
 "run" is the truth plus a fresh noise draw; its error is the GP it fits
@@ -14,7 +14,7 @@ against the noise-free truth on a 25 x 25 grid over the sweep box
 (nRMSE = RMSE / std of the truth, mean over the four metrics).  Repeated
 ``--reps`` times (noise draws and Sobol seeds), for: the nested grids (9, 15,
 25, 27, 45 runs), Sobol designs and the adaptive loop
-(:func:`analysis.adaptive.run_adaptive`, 10 Sobol points and batches of 3, up
+(:func:`analysis.surrogate.adaptive.run_adaptive`, 10 Sobol points and batches of 3, up
 to ``--max-runs``) with each acquisition (``mepe``, ``imse``), scored after
 every round.
 
@@ -33,13 +33,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.config import load_config
+from analysis.metrics.dataset import METRICS
+from analysis.surrogate.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds
+from analysis.surrogate.candidates import GPSurrogate
+from analysis.surrogate.data import inputs_of, targets_of
+from benchmarks.bench_adaptive import cpu_model, subgrids
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds  # noqa: E402
-from analysis.config import load_config  # noqa: E402
-from analysis.model_choice import GPSurrogate  # noqa: E402
-from analysis.surrogate import METRICS, inputs_of, targets_of  # noqa: E402
-from benchmarks.bench_adaptive import cpu_model, subgrids  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -70,7 +71,7 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     say = lambda line: print(line, flush=True)  # noqa: E731
     say(f"truth: GP on {len(data)} runs of {args.dataset}; length scales (U mm/s, omega rad/s) "
-        + "; ".join(f"{m} {l[0]:.1f}, {l[1]:.2f}" for m, l in zip(METRICS, truth.length_scales_))
+        + "; ".join(f"{m} {ls[0]:.1f}, {ls[1]:.2f}" for m, ls in zip(METRICS, truth.length_scales_))
         + "; noise sd " + ", ".join(f"{m} {s:.3g}" for m, s in zip(METRICS, noise)))
 
     def error(model):
@@ -81,7 +82,7 @@ def main(argv=None) -> int:
     for rep in range(args.reps):
         rng = np.random.default_rng(rep)
 
-        def run(points):
+        def run(points, rng=rng):
             P = np.atleast_2d(np.asarray(points, float))
             Y = truth.predict(P) + rng.normal(size=(len(P), len(METRICS))) * noise
             return pd.DataFrame(np.c_[P, Y], columns=["U_mm_s", "omega_rad_s", *METRICS])
@@ -96,7 +97,7 @@ def main(argv=None) -> int:
             rows.append({"design": "sobol", "label": f"sobol {n}", "rep": rep, "n_runs": n,
                          **error(fitted(sobol.iloc[:n]))})
         for acq in ACQUISITIONS:
-            def score(k, frame, gp, acq=acq):
+            def score(k, frame, gp, acq=acq, rep=rep):
                 rows.append({"design": f"adaptive {acq}", "label": f"adaptive {acq}", "rep": rep,
                              "n_runs": len(frame), **error(gp)})
             run_adaptive(run, bounds, {**settings, "acquisition": acq, "seed": rep},
@@ -122,7 +123,7 @@ def write_md(table, args, settings, truth, noise, elapsed, path):
              f"{elapsed:.0f} s, by `.venv/bin/python benchmarks/bench_adaptive_proxy.py "
              f"{' '.join(sys.argv[1:])}` (no DEM run: the truth is a GP fitted to `{args.dataset.name}`).", "",
              "Truth: length scales (U mm/s, omega rad/s) "
-             + "; ".join(f"{s} {l[0]:.1f}, {l[1]:.2f}" for s, l in zip(symbols, truth.length_scales_))
+             + "; ".join(f"{s} {ls[0]:.1f}, {ls[1]:.2f}" for s, ls in zip(symbols, truth.length_scales_))
              + "; run-to-run noise sd " + ", ".join(f"{s} {v:.3g}" for s, v in zip(symbols, noise))
              + " (the dataset's units). The sweep box is 60 mm/s x 40 rad/s.", "",
              f"Error: nRMSE of each design's GP against the noise-free truth on a 25 x 25 grid, mean "

@@ -31,16 +31,15 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
+from analysis.config import load_config, scene
+from analysis.dem.liggghts import LiggghtsError, children_cpu
+from analysis.dem.simulate import make_geometry, settle, spread
+from analysis.metrics.dump import read_dump
+from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config, scene  # noqa: E402
-from analysis.dump import read_dump  # noqa: E402
-from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
-from analysis.run_liggghts import LiggghtsError, children_cpu  # noqa: E402
-from analysis.simulate import make_geometry, settle, spread  # noqa: E402
 
 METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
 
@@ -244,7 +243,8 @@ def main(argv=None) -> int:
     text = (f"# Run time against error ({args.level} level)\n\n" + when +
             f"Points (U mm/s, omega rad/s): {points}; {args.seeds} seeds (heap packings) per variant.\n"
             f"Error: mean over the points of |variant - reference| / mean |reference|, each the mean "
-            f"over its seeds; M_s per unit sampling area (a wider strip has a wider region).\n\nVariants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")
+            f"over its seeds; M_s per unit sampling area (a wider strip has a wider region).\n\n"
+            f"Variants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")
     (out / f"{args.name}.md").write_text(text)
     print(text)
     return 0

@@ -1,4 +1,4 @@
-"""Benchmark of analysis.layer_metrics: time and peak memory vs particles and probes.
+"""Benchmark of analysis.metrics.profilometer: time and peak memory vs particles and probes.
 
 Run from the repository root::
 
@@ -25,11 +25,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from analysis.metrics.dump import read_dump, write_dump
+from analysis.metrics.profilometer import spread_layer_metrics
 
-from analysis.dump import read_dump, write_dump  # noqa: E402
-from analysis.layer_metrics import spread_layer_metrics  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 SIDE = 25e-3  # region side [m]
 REGION = (0.0, SIDE, 0.0, SIDE)
@@ -112,7 +111,7 @@ def main():
             atoms = layers.setdefault(n, polydisperse_layer(n))
             substrate = str(stl) if sub == "stl" else None
 
-            def run():
+            def run(atoms=atoms, substrate=substrate, lines=lines):
                 return spread_layer_metrics(atoms, REGION, SPEED, DENSITY, substrate=substrate, n_lines=lines)
 
             seconds, peak = measure(run, repeats=3 if n * lines <= 1e8 else 1)
@@ -131,7 +130,7 @@ def main():
         "|---:|---:|---|---:|---:|",
         *rows,
     ])
-    text = f"""# Benchmark: spread-layer metrics (`analysis/layer_metrics.py`)
+    text = f"""# Benchmark: spread-layer metrics (`analysis/metrics/profilometer.py`)
 
 Machine: {machine()}. One process, threads as the environment left them.
 Measured by `.venv/bin/python benchmarks/bench_layer_metrics.py`: the whole

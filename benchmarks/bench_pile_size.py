@@ -24,12 +24,12 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
+from analysis.config import load_config, run_name, scene
+from analysis.dem.simulate import spread
+from analysis.metrics.dump import read_dump
+from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config, run_name, scene  # noqa: E402
-from analysis.dump import read_dump  # noqa: E402
-from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
-from analysis.simulate import spread  # noqa: E402
 
 #: The scene whose settled heaps and substrates every pile spreads from (benchmarks/scene_size.yaml).
 BASE_LEVEL = "fed_default"
@@ -82,8 +82,10 @@ def main(argv=None) -> int:
     lines = ["# Pile size under forward rolling", "",
              f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, in "
              f"{time.perf_counter() - started:.0f} s ({args.jobs} runs at once), by "
-             f"`.venv/bin/python benchmarks/bench_pile_size.py {' '.join(argv if argv is not None else sys.argv[1:])}`.",
-             "", f"The fed_default scene at U = {args.U:g} mm/s, omega = {args.omega:g} rad/s, {args.replicates} replicates "
+             "`.venv/bin/python benchmarks/bench_pile_size.py "
+             f"{' '.join(argv if argv is not None else sys.argv[1:])}`.",
+             "", f"The fed_default scene at U = {args.U:g} mm/s, omega = {args.omega:g} rad/s, "
+             f"{args.replicates} replicates "
              "(its heap packings and substrates) per pile; mean and seed-to-seed sd; cost in LIGGGHTS CPU "
              "seconds per run. M_s per area in mg/mm^2, Q_s mm^2/s, R_q and thickness um, Phi %.", "",
              summary.reset_index().to_markdown(index=False, floatfmt=".3g"), ""]

@@ -22,10 +22,10 @@ from pathlib import Path
 
 import pandas as pd
 
+from analysis.config import load_config, scene
+from analysis.dem.drop import drop_sphere, first_bounce
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config, scene  # noqa: E402
-from analysis.drop_test import drop_sphere, first_bounce  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -56,7 +56,8 @@ def main(argv=None) -> int:
     wide.columns = [f"{d:g} um: error %" for d in wide.columns]
     text = (f"# Realised restitution against the time step\n\n"
             f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, by\n"
-            f"`.venv/bin/python benchmarks/bench_restitution.py {' '.join(argv if argv is not None else sys.argv[1:])}`.\n\n"
+            "`.venv/bin/python benchmarks/bench_restitution.py "
+            f"{' '.join(argv if argv is not None else sys.argv[1:])}`.\n\n"
             f"One sphere dropped 1 mm onto a flat wall, configured restitution "
             f"{config['material']['restitution']}; error of the first bounce's rebound/impact speed.\n"
             f"The time step is the fraction x the Rayleigh time of the smallest particle.\n\n"

@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.config import load_config, scene
+from analysis.dem.simulate import make_geometry, settle, spread
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config, scene  # noqa: E402
-from analysis.simulate import make_geometry, settle, spread  # noqa: E402
 
 U_MM_S, OMEGA = 100.0, -5.0
 
@@ -105,7 +105,8 @@ def main(argv=None) -> int:
         base = next(r for r in rows if r["level"] == row["level"] and r["ranks"] == ranks[0])
         speedup = base["wall_s"] / row["wall_s"] * row["steps"] / base["steps"]
         lines.append(f"| {row['level']} | {row['particles']} | {row['ranks']} | `{row['grid']}` | {row['steps']} | "
-                     f"{row['wall_s']:.1f} | {row['rate']:.3g} | {speedup:.2f} | {speedup / row['ranks'] * ranks[0]:.0%} |")
+                     f"{row['wall_s']:.1f} | {row['rate']:.3g} | {speedup:.2f} | "
+                     f"{speedup / row['ranks'] * ranks[0]:.0%} |")
     text = (f"# MPI scaling and the paper level's cost\n\nMeasured {time.strftime('%Y-%m-%d')} on "
             f"{platform.machine()}, {os.cpu_count()} cores, by `.venv/bin/python benchmarks/bench_scaling.py "
             f"{' '.join(argv if argv is not None else sys.argv[1:])}`.\n\n"
@@ -129,7 +130,8 @@ def main(argv=None) -> int:
              f"- time step {s.timestep:.3g} s ({len(s.diameters)} size classes, smallest "
              f"{min(s.diameters) * 1e6:.0f} um); roller travel {(s.travel_end - x0) * 1e3:.0f} mm plus up to "
              f"{s.rest_time:g} s of rest: {min(steps_per_U.values()):,} (U = {max(steps_per_U):g} mm/s) to "
-             f"{max(steps_per_U.values()):,} (U = {min(steps_per_U):g} mm/s) steps, mean {mean_steps:,.0f} over the sweep\n"
+             f"{max(steps_per_U.values()):,} (U = {min(steps_per_U):g} mm/s) steps, "
+             f"mean {mean_steps:,.0f} over the sweep\n"
              f"- particle-steps per run: {s.heap_particles:,} x {mean_steps:,.0f} = {particle_steps:.3g}\n"
              f"- rate per core: {big['rate']:.3g} particle-steps/s (the `{big['level']}` spread on one rank, "
              f"above); parallel efficiency {efficiency:.0%} (its 2-rank run), assumed to hold on {n_cores} cores\n"

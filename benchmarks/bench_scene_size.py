@@ -13,7 +13,7 @@ Reads each level's finished runs (every run folder's ``metrics.json``, ``health.
 
 - ``<name>_deposit.csv``, ``.png``: the reference's deposit profiles (layer mass per
   area along the travel) and, per point, where the layer reaches steady state
-  (:func:`analysis.deposit.steady_state_start`, plateau: the region's far half);
+  (:func:`analysis.metrics.deposit.steady_state_start`, plateau: the region's far half);
 - ``<name>_pile.csv``, ``.png`` (unfed levels only): per bin past the heap's toe, the layer's
   areal mass against the powder still ahead of the roller (mass balance): does the deposit
   depend on the pile?
@@ -40,12 +40,12 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from analysis.config import load_config, scene
+from analysis.metrics.deposit import deposit_profile, pile_ahead, profile_figure, run_profiles, steady_state_start
+from analysis.metrics.dump import read_dump
+from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config, scene  # noqa: E402
-from analysis.deposit import deposit_profile, pile_ahead, profile_figure, run_profiles, steady_state_start  # noqa: E402
-from analysis.dump import read_dump  # noqa: E402
-from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
 
 METRICS = {"mass_mg_mm2": "M_s/area", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
 #: Converged: every point mean within this many pooled reference sds.
@@ -119,7 +119,7 @@ def compare(name: str, runs: pd.DataFrame, ref_runs: pd.DataFrame, sd: pd.Series
 def deposit_against_pile(config: dict, levels: list[str]) -> pd.DataFrame:
     """Every bin past the settled heap's toe of every run of ``levels``: the layer's areal mass
     [mg/mm^2] against the powder still ahead of the roller there [mg/mm of width]
-    (:func:`analysis.deposit.pile_ahead`). A deposit that depends on the pile alone
+    (:func:`analysis.metrics.deposit.pile_ahead`). A deposit that depends on the pile alone
     collapses onto one curve whatever the heap's size."""
     tables = []
     for level in levels:
@@ -131,7 +131,8 @@ def deposit_against_pile(config: dict, levels: list[str]) -> pd.DataFrame:
             settle_dir = ROOT / "results" / level / "settle" / f"r{run['replicate']}"
             heap = read_dump(settle_dir / "settled.dump").atoms
             toe = json.loads((settle_dir / "health.json").read_text())["heap_toe_m"] * 1e3
-            heap_mass = 1e3 * s.density * 4 / 3 * np.pi * np.sum(heap["radius"].to_numpy() ** 3) / s.strip_width  # mg/mm
+            heap_volume = 4 / 3 * np.pi * np.sum(heap["radius"].to_numpy() ** 3)
+            heap_mass = 1e3 * s.density * heap_volume / s.strip_width  # mg/mm
             profile = deposit_profile(read_dump(folder / "final.dump").atoms, s.density, s.strip_width,
                                       (s.box[0], s.sampling_region[1]))
             profile["pile_mg_mm"] = pile_ahead(profile, heap_mass)
@@ -238,14 +239,16 @@ def main(argv=None) -> int:
              + ", ".join(f"({U:g}, {w:g}): {x:g} mm" for (U, w), x in starts.items()), "",
              f"Differences: max over the points of |mean - reference mean| / the reference's pooled seed-to-seed sd; "
              f"converged below {TOLERANCE_SD:g} for every metric. The reference's pooled seed-to-seed sd "
-             f"(noise floor; M_s/area in mg/mm^2, Q_s mm^2/s, R_q um, Phi %): {floor}. Cost: LIGGGHTS' CPU seconds per spreading run "
+             f"(noise floor; M_s/area in mg/mm^2, Q_s mm^2/s, R_q um, Phi %): {floor}. "
+             "Cost: LIGGGHTS' CPU seconds per spreading run "
              "(re-measured regions: the reference's cost scaled by their share of the travel).", "",
              table[[c for c in table if not c.startswith(("max_diff_pooled", "within", "seed_sd"))]].to_markdown(
                  index=False, floatfmt=".3g"), "",
              "The same differences in units of the two scenes' pooled seed-to-seed sd (both scenes' replicates, "
              f"pooled over the points: the usual effect size; within below {TOLERANCE_SD:g}), and each scene's own "
              "pooled seed-to-seed sd in % of its mean:", "",
-             table[["scene"] + [c for c in table if c.startswith(("max_diff_pooled", "within", "seed_sd"))]].to_markdown(
+             table[["scene"] + [c for c in table
+                                if c.startswith(("max_diff_pooled", "within", "seed_sd"))]].to_markdown(
                  index=False, floatfmt=".3g"), ""]
     (out / f"{args.name}.md").write_text("\n".join(lines))
     print("\n".join(lines))

@@ -11,7 +11,7 @@ Two arms over the same (U [mm/s], omega [rad/s]) points, measured in one invocat
   run starts from that restart; a run ends when the roller has passed the
   sampling region and the layer has come to rest; the powder pushed past the
   stopped roller is removed; only the final state is dumped
-  (``analysis.simulate.SKIPS``).
+  (``analysis.dem.simulate.SKIPS``).
 * **no skips**: every run settles its own heap (the same seed, so the same
   heap), waits the full ``rest_time_s`` after the travel, keeps the powder
   ahead of the roller and dumps every 2 ms of simulated time.
@@ -36,11 +36,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from analysis.config import load_config
+from analysis.dem.simulate import SKIPS, make_geometry, settle, spread
+from benchmarks.bench_fidelity import METRICS, children_cpu, measure_layer
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config  # noqa: E402
-from analysis.simulate import SKIPS, make_geometry, settle, spread  # noqa: E402
-from benchmarks.bench_fidelity import METRICS, children_cpu, measure_layer  # noqa: E402
 
 DEFAULT_POINTS = ",".join(f"{U}:{w}" for U in (40, 70, 100) for w in (-10, 0, 10))
 
@@ -69,7 +69,7 @@ def run_point(task) -> list[dict]:
 
 def noise_floor(path: Path) -> pd.Series | None:
     """Pooled seed-to-seed spread of each metric [fraction of its mean], from a
-    noise-floor CSV of the workflow (``analysis.noise_floor``)."""
+    noise-floor CSV of the workflow (``analysis.metrics.noise_floor``)."""
     if not path.exists():
         return None
     pooled = pd.read_csv(path).set_index("point").loc["pooled"]

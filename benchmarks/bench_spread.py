@@ -12,10 +12,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from analysis.config import load_config
+from analysis.dem.simulate import make_geometry, settle, spread
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from analysis.config import load_config  # noqa: E402
-from analysis.simulate import make_geometry, settle, spread  # noqa: E402
 
 
 def cpu_model() -> str:

@@ -1,9 +1,8 @@
 # Shared by every rule file: the checked configuration, the fidelity level and the runs.
-from analysis.deposit import profile_runs as deposit_profile_runs  # noqa: E402
-from analysis.config import (ConfigError, design_points, load_config, run_name, scene,  # noqa: E402
-                             simulation_fingerprint)
+from analysis.metrics.deposit import profile_runs as deposit_profile_runs
+from analysis.config import ConfigError, design_points, load_config, run_name, scene, simulation_fingerprint
 
-try:
+try:  # the one check of the workflow's config (schema, then facts across keys); jobs trust it
     CONFIG = load_config(config, base_dir=workflow.basedir)
 except ConfigError as err:
     raise WorkflowError(f"config.yaml: {err}") from None
@@ -31,6 +30,7 @@ PROFILE_RUNS = deposit_profile_runs(POINTS, CONFIG["sweep"]["replicates"])
 _U_MAX = max(U for U, _ in POINTS)
 _OMEGAS = sorted({min([w for U, w in POINTS if U == _U_MAX], key=lambda w: abs(w - t)) for t in (-5, 0, 5)})
 TOP_VIEWS = [f"{OUT}/top_views/{run_name(_U_MAX, w, 0)}.png" for w in _OMEGAS]
+
 
 wildcard_constraints:
     U=r"[0-9.e+-]+",

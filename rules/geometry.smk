@@ -5,12 +5,12 @@ rule geometry:
         roller=f"{OUT}/meshes/r{{rep}}/roller.stl",
         roller_shell=f"{OUT}/meshes/r{{rep}}/roller_shell.stl",
         summary=f"{OUT}/meshes/r{{rep}}/geometry.json",
-    params:
-        level=LEVEL,
-        physics=GEOMETRY_FINGERPRINT,
     log:
         f"{LOGS}/geometry/r{{rep}}.log",
     benchmark:
         f"{BENCH}/geometry/r{{rep}}.tsv"
+    params:
+        level=LEVEL,
+        physics=GEOMETRY_FINGERPRINT,
     script:
         "../scripts/geometry.py"

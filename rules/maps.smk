@@ -5,7 +5,7 @@ rule maps:
         dataset=rules.dataset.output[0],
         split=rules.surrogate.output.split,
     output:
-        report(directory(f"{OUT}/maps"), patterns=["{name}.png"], category="Process maps"),
+        report(directory(f"{OUT}/maps"), patterns=["{name}.png"], caption="../report/maps.rst", category="Process maps"),
     log:
         f"{LOGS}/maps.log",
     benchmark:
@@ -19,10 +19,14 @@ rule top_view:
     input:
         rules.spread.output.dump,
     output:
-        report(f"{OUT}/top_views/U{{U}}_w{{omega}}_r{{rep}}.png", category="Top views"),
-    params:
-        region=SCENE.sampling_region,
+        report(
+            f"{OUT}/top_views/U{{U}}_w{{omega}}_r{{rep}}.png", caption="../report/top_view.rst", category="Top views"
+        ),
     log:
         f"{LOGS}/top_view/U{{U}}_w{{omega}}_r{{rep}}.log",
+    benchmark:
+        f"{BENCH}/top_view/U{{U}}_w{{omega}}_r{{rep}}.tsv"
+    params:
+        region=SCENE.sampling_region,
     script:
         "../scripts/top_view.py"

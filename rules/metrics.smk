@@ -6,13 +6,13 @@ rule layer_metrics:
     output:
         metrics=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/metrics.json",
         vtk=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/final.vtp",  # here, not in a rule of its own: one Python start per run
-    params:
-        level=LEVEL,
-        profilometer=PROFILOMETER,
     log:
         f"{LOGS}/metrics/U{{U}}_w{{omega}}_r{{rep}}.log",
     benchmark:
         f"{BENCH}/metrics/U{{U}}_w{{omega}}_r{{rep}}.tsv"
+    params:
+        level=LEVEL,
+        profilometer=PROFILOMETER,
     script:
         "../scripts/layer_metrics.py"
 
@@ -24,9 +24,11 @@ rule dataset:
         health=expand(f"{OUT}/runs/{{run}}/health.json", run=RUNS),
         benchmarks=expand(f"{BENCH}/spread/{{run}}.tsv", run=RUNS),
     output:
-        report(f"{OUT}/dataset.csv", category="Dataset"),
+        report(f"{OUT}/dataset.csv", caption="../report/dataset.rst", category="Dataset"),
     log:
         f"{LOGS}/dataset.log",
+    benchmark:
+        f"{BENCH}/dataset.tsv"
     script:
         "../scripts/dataset.py"
 
@@ -36,7 +38,7 @@ rule trends:
     input:
         rules.dataset.output[0],
     output:
-        report(f"{OUT}/trends.md", category="Dataset"),
+        report(f"{OUT}/trends.md", caption="../report/trends.rst", category="Dataset"),
     log:
         f"{LOGS}/trends.log",
     script:
@@ -50,10 +52,12 @@ rule deposit_profile:
     output:
         csv=f"{OUT}/deposit_profile.csv",
         png=report(f"{OUT}/deposit_profile.png", caption="../report/deposit_profile.rst", category="Dataset"),
+    log:
+        f"{LOGS}/deposit_profile.log",
+    benchmark:
+        f"{BENCH}/deposit_profile.tsv"
     params:
         level=LEVEL,
         runs=PROFILE_RUNS,
-    log:
-        f"{LOGS}/deposit_profile.log",
     script:
         "../scripts/deposit_profile.py"

@@ -6,9 +6,10 @@ rule settle:
         restart=f"{OUT}/settle/r{{rep}}/settled.restart",
         dump=f"{OUT}/settle/r{{rep}}/settled.dump",
         health=f"{OUT}/settle/r{{rep}}/health.json",
-    params:
-        level=LEVEL,
-        physics=SIMULATION_FINGERPRINT,
+    log:
+        f"{LOGS}/settle/r{{rep}}.log",
+    benchmark:
+        f"{BENCH}/settle/r{{rep}}.tsv"
     threads: SCENE.mpi_ranks
     resources:
         mpi=SCENE.mpi_ranks if SCENE.mpi_ranks > 1 else None,  # SLURM plugin: mpi means tasks > 1
@@ -16,10 +17,9 @@ rule settle:
         runtime=SCENE.runtime_min,
         mem_mb=SCENE.mem_mb_per_rank * SCENE.mpi_ranks if SCENE.mem_mb_per_rank else None,
         mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
-    log:
-        f"{LOGS}/settle/r{{rep}}.log",
-    benchmark:
-        f"{BENCH}/settle/r{{rep}}.tsv"
+    params:
+        level=LEVEL,
+        physics=SIMULATION_FINGERPRINT,
     script:
         "../scripts/settle.py"
 
@@ -34,9 +34,10 @@ rule spread:
     output:
         dump=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/final.dump",
         health=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/health.json",
-    params:
-        level=LEVEL,
-        physics=SIMULATION_FINGERPRINT,
+    log:
+        f"{LOGS}/spread/U{{U}}_w{{omega}}_r{{rep}}.log",
+    benchmark:
+        f"{BENCH}/spread/U{{U}}_w{{omega}}_r{{rep}}.tsv"
     threads: SCENE.mpi_ranks
     resources:
         mpi=SCENE.mpi_ranks if SCENE.mpi_ranks > 1 else None,  # SLURM plugin: mpi means tasks > 1
@@ -44,9 +45,8 @@ rule spread:
         runtime=SCENE.runtime_min,
         mem_mb=SCENE.mem_mb_per_rank * SCENE.mpi_ranks if SCENE.mem_mb_per_rank else None,
         mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
-    log:
-        f"{LOGS}/spread/U{{U}}_w{{omega}}_r{{rep}}.log",
-    benchmark:
-        f"{BENCH}/spread/U{{U}}_w{{omega}}_r{{rep}}.tsv"
+    params:
+        level=LEVEL,
+        physics=SIMULATION_FINGERPRINT,
     script:
         "../scripts/spread.py"

@@ -4,13 +4,13 @@ rule noise_floor:
         dataset=rules.dataset.output[0],
     output:
         csv=f"{OUT}/surrogate/noise_floor.csv",
-        md=report(f"{OUT}/surrogate/noise_floor.md", category="Surrogate"),
-    params:
-        level=LEVEL,
+        md=report(f"{OUT}/surrogate/noise_floor.md", caption="../report/noise_floor.rst", category="Surrogate"),
     log:
         f"{LOGS}/noise_floor.log",
     benchmark:
         f"{BENCH}/noise_floor.tsv"
+    params:
+        level=LEVEL,
     script:
         "../scripts/noise_floor.py"
 
@@ -21,15 +21,15 @@ rule model_choice:
         dataset=rules.dataset.output[0],
     output:
         csv=f"{OUT}/surrogate/model_choice.csv",
-        md=report(f"{OUT}/surrogate/model_choice.md", category="Surrogate"),
-    params:
-        surrogate=CONFIG["surrogate"],
-        level=LEVEL,
-    threads: 4  # folds fitted at once; Snakemake caps it at --cores
+        md=report(f"{OUT}/surrogate/model_choice.md", caption="../report/model_choice.rst", category="Surrogate"),
     log:
         f"{LOGS}/model_choice.log",
     benchmark:
         f"{BENCH}/model_choice.tsv"
+    threads: 4  # folds fitted at once; Snakemake caps it at --cores
+    params:
+        surrogate=CONFIG["surrogate"],
+        level=LEVEL,
     script:
         "../scripts/model_choice.py"
 
@@ -41,15 +41,15 @@ rule surrogate:
         choice=rules.model_choice.output.csv,
     output:
         model=f"{OUT}/surrogate/model.joblib",
-        scores=report(f"{OUT}/surrogate/scores.json", category="Surrogate"),
+        scores=report(f"{OUT}/surrogate/scores.json", caption="../report/scores.rst", category="Surrogate"),
         split=f"{OUT}/surrogate/split.csv",
-        grid=report(f"{OUT}/surrogate/grid.csv", category="Surrogate"),
-    params:
-        surrogate=CONFIG["surrogate"],
-        grid_points=CONFIG["surrogate"]["grid_points"],
+        grid=report(f"{OUT}/surrogate/grid.csv", caption="../report/grid.rst", category="Surrogate"),
     log:
         f"{LOGS}/surrogate.log",
     benchmark:
         f"{BENCH}/surrogate.tsv"
+    params:
+        surrogate=CONFIG["surrogate"],
+        grid_points=CONFIG["surrogate"]["grid_points"],
     script:
         "../scripts/fit_surrogate.py"

@@ -1,11 +1,9 @@
 """Snakemake entry: deposit profiles (layer mass along the travel) of a few runs, region shaded."""
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(snakemake.scriptdir).parent))
-from analysis.config import scene  # noqa: E402
-from analysis.deposit import profile_figure, run_profiles  # noqa: E402
-from analysis.workflow import atomic_path, rule_context  # noqa: E402
+from analysis.config import scene
+from analysis.io import atomic_path
+from analysis.metrics.deposit import profile_figure, run_profiles
+from analysis.rule import rule_context
 
 with rule_context(snakemake) as config:
     s = scene(config, snakemake.params.level)

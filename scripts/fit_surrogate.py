@@ -1,15 +1,16 @@
 """Snakemake entry: the paper's network (Table 2) scores, then the model chosen by
 cross-validation fitted on the same training points; write model, scores, split, grid."""
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(snakemake.scriptdir).parent))
-import pandas as pd  # noqa: E402
+import pandas as pd
 
-from analysis.model_choice import chosen_summary, fit_chosen, read_choice  # noqa: E402
-from analysis.surrogate import (fit_surrogate, format_scores, predict_grid,  # noqa: E402
-                                save_surrogate, split_table)
-from analysis.workflow import atomic_path, rule_context, write_json  # noqa: E402
+from analysis.io import atomic_path, write_json
+from analysis.rule import rule_context
+from analysis.surrogate.data import split_table
+from analysis.surrogate.network import fit_surrogate
+from analysis.surrogate.persistence import save_surrogate
+from analysis.surrogate.predict import predict_grid
+from analysis.surrogate.scores import format_scores
+from analysis.surrogate.selection import chosen_summary, fit_chosen, read_choice
 
 with rule_context(snakemake):
     out, params = snakemake.output, snakemake.params.surrogate

@@ -1,10 +1,9 @@
 """Snakemake entry: write one replicate's substrate and roller meshes."""
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(snakemake.scriptdir).parent))
-from analysis.simulate import make_geometry  # noqa: E402
-from analysis.workflow import rule_context, write_json  # noqa: E402
+from analysis.dem.simulate import make_geometry
+from analysis.io import write_json
+from analysis.rule import rule_context
 
 with rule_context(snakemake) as config:
     summary = make_geometry(config, snakemake.params.level, Path(snakemake.output.substrate).parent,

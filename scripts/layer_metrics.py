@@ -1,13 +1,11 @@
 """Snakemake entry: the paper's layer metrics (eqs. 1-7) of one run, and its final state as VTK."""
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(snakemake.scriptdir).parent))
-from analysis.config import scene  # noqa: E402
-from analysis.dump import read_dump  # noqa: E402
-from analysis.layer_metrics import spread_layer_metrics, to_report_units  # noqa: E402
-from analysis.render import write_vtk  # noqa: E402
-from analysis.workflow import rule_context, write_json  # noqa: E402
+from analysis.config import scene
+from analysis.io import write_json
+from analysis.metrics.dump import read_dump
+from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+from analysis.rule import rule_context
+from analysis.viz.views import write_vtk
 
 with rule_context(snakemake) as config:
     s = scene(config, snakemake.params.level)

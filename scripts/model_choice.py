@@ -1,14 +1,10 @@
 """Snakemake entry: score the candidate surrogates by cross-validation; name the chosen one."""
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(snakemake.scriptdir).parent))
-import pandas as pd  # noqa: E402
+import pandas as pd
 
-from analysis.model_choice import (choose_model, cross_validate_models,  # noqa: E402
-                                   model_choice_markdown, write_model_choice)
-from analysis.noise_floor import accuracy_ceiling  # noqa: E402
-from analysis.workflow import rule_context  # noqa: E402
+from analysis.metrics.noise_floor import accuracy_ceiling
+from analysis.rule import rule_context
+from analysis.surrogate.selection import choose_model, cross_validate_models, model_choice_markdown, write_model_choice
 
 with rule_context(snakemake):
     params = snakemake.params.surrogate

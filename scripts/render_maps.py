@@ -1,13 +1,11 @@
 """Snakemake entry: Figures 6-10 (surfaces, parity plots, process map) into a directory."""
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(snakemake.scriptdir).parent))
-import pandas as pd  # noqa: E402
+import pandas as pd
 
-from analysis.maps import render_maps  # noqa: E402
-from analysis.surrogate import load_surrogate, read_split  # noqa: E402
-from analysis.workflow import rule_context  # noqa: E402
+from analysis.rule import rule_context
+from analysis.surrogate.data import read_split
+from analysis.surrogate.persistence import load_surrogate
+from analysis.viz.maps import render_maps
 
 with rule_context(snakemake):
     model, _ = load_surrogate(snakemake.input.model)

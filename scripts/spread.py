@@ -1,10 +1,8 @@
 """Snakemake entry: one spreading pass at the run's U [mm/s] and omega [rad/s]."""
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(snakemake.scriptdir).parent))
-from analysis.simulate import spread  # noqa: E402
-from analysis.workflow import rule_context  # noqa: E402
+from analysis.dem.simulate import spread
+from analysis.rule import rule_context
 
 with rule_context(snakemake) as config:
     w = snakemake.wildcards

@@ -1,12 +1,11 @@
 """Snakemake entry: the paper's trends beside the dataset's, as Markdown."""
-import sys
-from pathlib import Path
 
 import pandas as pd
 
-sys.path.insert(0, str(Path(snakemake.scriptdir).parent))
-from analysis.trends import markdown, trend_table  # noqa: E402
-from analysis.workflow import rule_context  # noqa: E402
+from analysis.io import write_text
+from analysis.metrics.trends import markdown, trend_table
+from analysis.rule import rule_context
 
-with rule_context(snakemake):
-    Path(snakemake.output[0]).write_text(markdown(trend_table(pd.read_csv(snakemake.input[0]))) + "\n")
+with rule_context(snakemake) as config:
+    table = trend_table(pd.read_csv(snakemake.input[0]), roller_radius_mm=config["roller"]["diameter_mm"] / 2)
+    write_text(markdown(table) + "\n", snakemake.output[0])

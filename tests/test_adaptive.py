@@ -5,10 +5,17 @@ import pandas as pd
 import pytest
 import yaml
 
-from analysis.adaptive import (WorkflowEvaluator, choose_batch, initial_design, lattice, main,
-                               run_adaptive, snap)
 from analysis.config import load_config, run_name
-from analysis.surrogate import METRICS
+from analysis.metrics.dataset import METRICS
+from analysis.surrogate.adaptive import (
+    WorkflowEvaluator,
+    choose_batch,
+    initial_design,
+    lattice,
+    main,
+    run_adaptive,
+    snap,
+)
 from tests.test_config import ROOT
 
 BOUNDS = ((40.0, 100.0), (-20.0, 20.0))
@@ -104,7 +111,7 @@ def test_adaptive_beats_a_quasi_random_design_of_the_same_size():
 
     (On the sharp one it finds the feature but, its GP being stationary, its map
     error at 19-22 runs is no better than Sobol's: see docs/uncertainty.md.)"""
-    from analysis.model_choice import GPSurrogate
+    from analysis.surrogate.candidates import GPSurrogate
     result = run_adaptive(Synthetic(function=broad_feature), BOUNDS, {**SETTINGS, "max_runs": 22},
                           log=lambda line: None)
     sobol = initial_design(22, BOUNDS, RES, "sobol", seed=0)
@@ -138,7 +145,7 @@ def test_excluded_points_are_never_chosen():
 
 
 def test_choose_batch_spreads_a_batch_out():
-    from analysis.model_choice import GPSurrogate
+    from analysis.surrogate.candidates import GPSurrogate
     X = initial_design(10, BOUNDS, RES, seed=1)
     Y = np.column_stack([corner_feature(*X.T)] * 4)
     gp = GPSurrogate().fit(X, Y)
@@ -151,8 +158,8 @@ def test_choose_batch_spreads_a_batch_out():
 
 def test_imse_is_the_brute_force_drop_of_the_mean_variance():
     """The closed-form integrated variance reduction equals refitting the variance with the run added."""
-    from analysis.adaptive import _reference, _variance_reduction
-    from analysis.model_choice import GPSurrogate
+    from analysis.surrogate.adaptive import _reference, _variance_reduction
+    from analysis.surrogate.candidates import GPSurrogate
     X = initial_design(8, BOUNDS, RES, seed=2)
     Y = np.column_stack([corner_feature(*X.T), broad_feature(*X.T), X[:, 0], X[:, 1] ** 2])
     gp = GPSurrogate().fit(X, Y)
@@ -168,7 +175,7 @@ def test_imse_is_the_brute_force_drop_of_the_mean_variance():
 
 def test_imse_serves_the_box_where_maximum_variance_goes_to_its_edge():
     """Runs crowded at low U: maximum variance picks the far edge U = 100, IMSE steps inside it."""
-    from analysis.model_choice import GPSurrogate
+    from analysis.surrogate.candidates import GPSurrogate
     X = np.array([(u, w) for u in (40.0, 50.0, 60.0) for w in (-20.0, 0.0, 20.0)])
     Y = np.column_stack([broad_feature(*X.T)] * 4) + 0.01 * np.arange(len(X))[:, None]
     gp = GPSurrogate(length_scale_bounds=(1.0, 1.0 + 1e-9)).fit(X, Y)

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from analysis.config import (ConfigError, coerce_cli_values, feed_length, liggghts_seeds, load_config,
-                             psd_classes, rayleigh_time, roller_motion, scene)
+from analysis.config import ConfigError, coerce_cli_values, load_config, scene
+from analysis.physics import feed_length, liggghts_seeds, psd_classes, rayleigh_time, roller_motion
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -122,7 +122,8 @@ def test_feed_zone_holds_twice_the_pile_in_the_wedge_ahead_of_the_roller():
     ahead, has the area g L + R^2 asin(L/R)/2 - L sqrt(R^2 - L^2)/2 + ... (integral of
     g + R - sqrt(R^2 - x^2)); the zone holds FEED_ZONE_ROOM x the pile's bulk volume."""
     from math import asin, sqrt
-    from analysis.config import FEED_ZONE_ROOM, PILE_SOLID_FRACTION
+
+    from analysis.physics import FEED_ZONE_ROOM, PILE_SOLID_FRACTION
     R, g, rho = 0.015, 3e-4, 4430.0
     for pile in (5e-3, 20e-3, 40e-3):                       # kg per m of width (mg/mm)
         L = feed_length(pile, rho, R, g)

@@ -3,7 +3,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.deposit import deposit_profile, profile_runs, steady_state_start
+from analysis.metrics.deposit import deposit_profile, profile_runs, steady_state_start
 
 RHO = 4430.0
 

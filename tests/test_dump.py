@@ -1,4 +1,4 @@
-"""Tests of analysis.dump: reading and writing LIGGGHTS dump custom files."""
+"""Tests of analysis.metrics.dump: reading and writing LIGGGHTS dump custom files."""
 
 import gzip
 
@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.dump import DumpError, Frame, read_dump, write_dump
+from analysis.metrics.dump import DumpError, Frame, read_dump, write_dump
 
 BOX = np.array([[-1e-3, 2e-3], [0.0, 3e-3], [0.0, 1e-3]])
 

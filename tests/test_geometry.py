@@ -3,10 +3,9 @@ import numpy as np
 import pytest
 import yaml
 
-from analysis import geometry
 from analysis.config import ConfigError, load_config, scene
-from analysis.simulate import make_geometry
-
+from analysis.dem import geometry
+from analysis.dem.simulate import make_geometry
 from tests.test_config import ROOT
 
 
@@ -82,7 +81,7 @@ def test_users_stl_replaces_the_generated_substrate(config, tmp_path):
     z = 40e-6 * np.sin(2 * np.pi * x / 1e-3)[:, None] * np.ones(len(y))
     geometry.write_stl(geometry.height_field_mesh(x, y, z), tmp_path / "mine.stl")
     mine = yaml.safe_load((ROOT / "config.yaml").read_text())
-    mine["substrate"]["stl"] = str(tmp_path / "mine.stl")
+    mine["substrate"]["mesh"] = str(tmp_path / "mine.stl")
     summary = make_geometry(load_config(mine), "smoke", tmp_path / "out")
     assert summary["substrate_sq_m"] == pytest.approx(40e-6 / np.sqrt(2), rel=0.02)
 
@@ -91,8 +90,8 @@ def test_users_stl_too_small_for_the_bed_is_refused(config, tmp_path):
     flat = geometry.height_field_mesh(np.linspace(0, 1e-3, 3), np.linspace(0, 1e-3, 3), np.zeros((3, 3)))
     geometry.write_stl(flat, tmp_path / "small.stl")
     mine = yaml.safe_load((ROOT / "config.yaml").read_text())
-    mine["substrate"]["stl"] = str(tmp_path / "small.stl")
-    with pytest.raises(ConfigError, match="substrate.stl"):
+    mine["substrate"]["mesh"] = str(tmp_path / "small.stl")
+    with pytest.raises(ConfigError, match="substrate.mesh"):
         make_geometry(load_config(mine), "smoke", tmp_path / "out")
 
 
@@ -115,3 +114,70 @@ def test_paper_level_substrate_is_made_with_peaks_clipped_below_the_roller(confi
     assert clipped.vertices[:, 2].max() == pytest.approx(0.9 * s.roller_gap)
     assert np.mean(clipped.vertices[:, 2] >= 0.9 * s.roller_gap) < 1e-3
     assert geometry.substrate_rms(clipped, s.sampling_region[:2])[1] == pytest.approx(79e-6, rel=0.01)
+
+
+def _stl_triangles(path):
+    """Triangles (n, 3, 3) [m] of an ASCII STL, read with numpy alone."""
+    lines = [line.split()[1:] for line in path.read_text().splitlines() if line.lstrip().startswith("vertex")]
+    return np.asarray(lines, float).reshape(-1, 3, 3)
+
+
+def test_rough_field_has_its_sq_and_correlation_length_measured_from_the_stl(tmp_path):
+    """Sq and the correlation length measured from the written STL, independently of the
+    generator: Sq as the area-weighted RMS of the piecewise-linear surface (a linear
+    triangle's mean z^2 is (sum z_i^2 + sum_{i<j} z_i z_j) / 6), and lc as the e-folding
+    length of the heights' autocorrelation along x (Gaussian field: exp(-r^2/lc^2))."""
+    lc, sq, spacing = 300e-6, 79e-6, 50e-6
+    mesh = geometry.rough_substrate((0.0, 0.012), 0.012, spacing, lc, sq, seed=5)
+    path = geometry.write_stl(mesh, tmp_path / "field.stl")
+    tri = _stl_triangles(path)
+    z = tri[:, :, 2]
+    (ax, ay), (bx, by) = (tri[:, 1, :2] - tri[:, 0, :2]).T, (tri[:, 2, :2] - tri[:, 0, :2]).T
+    area = 0.5 * np.abs(ax * by - ay * bx)
+    mean_z2 = ((z ** 2).sum(1) + z[:, 0] * z[:, 1] + z[:, 1] * z[:, 2] + z[:, 0] * z[:, 2]) / 6
+    mean_z = z.mean(1)
+    assert np.sqrt(np.sum(area * mean_z2) / area.sum() - (np.sum(area * mean_z) / area.sum()) ** 2) == \
+        pytest.approx(sq, rel=0.02)
+    # the nodes' heights on their grid, from the vertices
+    v = np.unique(tri.reshape(-1, 3).round(12), axis=0)
+    xs, ys = np.unique(v[:, 0]), np.unique(v[:, 1])
+    heights = np.full((len(xs), len(ys)), np.nan)
+    heights[np.searchsorted(xs, v[:, 0]), np.searchsorted(ys, v[:, 1])] = v[:, 2]
+    heights = heights[:, :-1] - heights[:, :-1].mean()       # the last row repeats the first (periodic)
+    spectrum = np.abs(np.fft.fft(heights, axis=0)) ** 2
+    acf = np.fft.ifft(spectrum, axis=0).real.mean(axis=1)
+    acf /= acf[0]
+    lag = np.arange(len(acf)) * spacing
+    k = np.argmax(acf < np.exp(-1))
+    e_fold = lag[k - 1] + (np.exp(-1) - acf[k - 1]) / (acf[k] - acf[k - 1]) * spacing
+    assert e_fold == pytest.approx(lc, rel=0.1)
+
+
+def test_users_surface_in_any_meshio_format_replaces_the_generated_substrate(config, tmp_path):
+    """substrate.mesh may be a PLY or VTK as well as an STL (meshio reads it); the
+    geometry step writes it as substrate.stl for LIGGGHTS, unchanged."""
+    import meshio
+    s = scene(config, "smoke")
+    x = np.arange(s.box[0], s.box[1] + 2e-5, 2e-5)
+    y = np.linspace(0, s.strip_width, 11)
+    z = 40e-6 * np.sin(2 * np.pi * x / 1e-3)[:, None] * np.ones(len(y))
+    field = geometry.height_field_mesh(x, y, z)
+    for name in ("mine.ply", "mine.vtk"):
+        meshio.write(tmp_path / name, meshio.Mesh(field.vertices, [("triangle", field.faces)]))
+        mine = yaml.safe_load((ROOT / "config.yaml").read_text())
+        mine["substrate"]["mesh"] = str(tmp_path / name)
+        summary = make_geometry(load_config(mine), "smoke", tmp_path / name.replace(".", "_"))
+        assert summary["substrate_sq_m"] == pytest.approx(40e-6 / np.sqrt(2), rel=0.02), name
+        written = geometry.load_stl(tmp_path / name.replace(".", "_") / "substrate.stl")
+        assert len(written.faces) == len(field.faces)
+        assert np.allclose(written.vertices[written.faces], field.vertices[field.faces], atol=1e-9)
+
+
+def test_a_surface_without_triangles_is_refused_by_key(config, tmp_path):
+    import meshio
+    meshio.write(tmp_path / "points.vtk", meshio.Mesh(np.random.default_rng(0).random((5, 3)),
+                                                         [("vertex", np.arange(5)[:, None])]))
+    mine = yaml.safe_load((ROOT / "config.yaml").read_text())
+    mine["substrate"]["mesh"] = str(tmp_path / "points.vtk")
+    with pytest.raises(ConfigError, match="substrate.mesh.*no triangles"):
+        make_geometry(load_config(mine), "smoke", tmp_path / "out")

@@ -1,4 +1,4 @@
-"""Tests of analysis.layer_metrics against hand-derived answers.
+"""Tests of analysis.metrics.profilometer against hand-derived answers.
 
 Sphere caps. A sphere of radius r resting on the plane z = b has its top at
 b + r + s(rho) over the disc rho < r, with s = sqrt(r^2 - rho^2), and the
@@ -27,13 +27,13 @@ import pandas as pd
 import pytest
 import trimesh
 
-import analysis.layer_metrics as lm
-from analysis.dump import read_dump, write_dump
-from analysis.layer_metrics import (
-    periodic_images,
+import analysis.metrics.profilometer as lm
+from analysis.metrics.dump import read_dump, write_dump
+from analysis.metrics.profilometer import (
     layer_porosity,
     layer_roughness,
     layer_top,
+    periodic_images,
     powder_mass,
     probe_lines,
     spread_layer_metrics,
@@ -419,7 +419,7 @@ def test_frame_box_checked_and_bad_values_rejected(tmp_path):
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "analysis.layer_metrics", *map(str, args)], cwd=REPO,
+    return subprocess.run([sys.executable, "-m", "analysis.metrics.profilometer", *map(str, args)], cwd=REPO,
                           capture_output=True, text=True, timeout=60)
 
 

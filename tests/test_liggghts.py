@@ -1,12 +1,10 @@
 """Real LIGGGHTS runs: the smoke scene settles and spreads, the material
 reaches the engine in the right units, and failures are loud."""
-import json
 import os
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,13 +12,13 @@ from scipy.spatial import cKDTree
 
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
-from analysis.config import load_config, scene  # noqa: E402
-from analysis.drop_test import drop_sphere, first_bounce, free_fall_time  # noqa: E402
-from analysis.dump import read_dump  # noqa: E402
-from analysis.run_liggghts import LiggghtsError, check_seeds, read_log, run  # noqa: E402
-from analysis.simulate import (checkpoint_plan, feed_plan, make_geometry, processors_grid, settle,  # noqa: E402
-                               spread, substrate_height, travel_segments)
-
+from analysis.config import scene
+from analysis.dem.drop import drop_sphere, first_bounce, free_fall_time
+from analysis.dem.health import substrate_height
+from analysis.dem.inputs import checkpoint_plan, feed_plan, processors_grid, travel_segments
+from analysis.dem.liggghts import LiggghtsError, check_seeds, read_log, run
+from analysis.dem.simulate import make_geometry, settle, spread
+from analysis.metrics.dump import read_dump
 from tests.test_config import ROOT  # noqa: E402
 
 pytestmark = pytest.mark.xdist_group("liggghts_smoke")
@@ -64,9 +62,9 @@ def test_roller_travels_U_t_and_turns_as_the_paper_says(smoke):
     assert travelled == pytest.approx(U_MM_S * 1e-3 * steps * s.timestep, rel=1e-5)  # dt printed to 6 digits
     bottom = np.argmin(c1[:, 2])
     # the roller's bottom point moves at U + omega R along the travel (paper: +25 mm/s here)
-    assert v1[bottom, 0] * 1e3 == pytest.approx(U_MM_S + OMEGA * 15.0, abs=0.2)
+    assert v1[bottom, 0] * 1e3 == pytest.approx(U_MM_S + OMEGA * s.roller_radius * 1e3, abs=0.2)
     top = np.argmax(c1[:, 2])
-    assert v1[top, 0] * 1e3 == pytest.approx(U_MM_S - OMEGA * 15.0, abs=0.2)
+    assert v1[top, 0] * 1e3 == pytest.approx(U_MM_S - OMEGA * s.roller_radius * 1e3, abs=0.2)
 
 
 def test_spread_lays_powder_past_the_heap_and_loses_nothing(smoke):
@@ -179,7 +177,7 @@ def test_killed_spread_resumes_from_its_newest_checkpoint(smoke, config):
     did, and nothing is lost."""
     root, s = smoke["root"], smoke["scene"]
     out = root / "killed"
-    cmd = [sys.executable, "-m", "analysis.simulate", "spread", "--level", "smoke", "--U", str(U_MM_S),
+    cmd = [sys.executable, "-m", "analysis.dem.simulate", "spread", "--level", "smoke", "--U", str(U_MM_S),
            "--omega", str(OMEGA), "--meshes", str(root / "meshes"), "--settled", str(root / "settle"),
            "--out", str(out)]
     job = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -273,7 +271,7 @@ def test_skips_change_the_cost_not_the_layer(smoke, config):
     more or less in the smoke region's ~110 moves its R_q and Phi by about a
     seed sd (measured: 92.5 against 97.9 um, 55.0 against 57.8 %), so they are
     not compared here."""
-    from analysis.layer_metrics import spread_layer_metrics
+    from analysis.metrics.profilometer import spread_layer_metrics
     root, s = smoke["root"], smoke["scene"]
     full = spread(config, "smoke", U_MM_S, OMEGA, root / "meshes", root / "settle", root / "noskips", skips=())
     assert full["removed_ahead_of_roller"] == 0

@@ -7,9 +7,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.maps import process_map_lines, render_maps
-from analysis.surrogate import (METRICS, hybrid_indices, metric_maxima, predict_grid,
-                                save_surrogate, split_table)
+from analysis.metrics.dataset import METRICS
+from analysis.surrogate.data import split_table
+from analysis.surrogate.persistence import save_surrogate
+from analysis.surrogate.predict import hybrid_indices, metric_maxima, predict_grid
+from analysis.viz.maps import process_map_lines, render_maps
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -93,7 +95,7 @@ def test_render_maps_script(fitted, dataset, tmp_path, fake_snakemake):
 
 
 def test_supply_limited_runs_are_ringed_on_the_surfaces_and_the_process_map(fitted, dataset):
-    from analysis.maps import process_map_figure, supply_limited, surface_figure
+    from analysis.viz.maps import process_map_figure, supply_limited, surface_figure
     model, scores = fitted
     split = (np.arange(35), np.arange(35, 45))
     limited = dataset.assign(heap_exhausted=dataset["omega_rad_s"] <= -15)
@@ -102,5 +104,6 @@ def test_supply_limited_runs_are_ringed_on_the_surfaces_and_the_process_map(fitt
     for fig in (surface_figure(model, limited, split, "mass_g", n=11), process_map_figure(model, limited, split, n=21)):
         labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
         assert any("supply-limited" in label for label in labels), labels
-    labels = [t.get_text() for t in surface_figure(model, dataset, split, "mass_g", n=11).axes[0].get_legend().get_texts()]
+    legend = surface_figure(model, dataset, split, "mass_g", n=11).axes[0].get_legend()
+    labels = [t.get_text() for t in legend.get_texts()]
     assert not any("supply-limited" in label for label in labels)

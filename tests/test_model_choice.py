@@ -1,6 +1,7 @@
 """Replicates, noise floor, candidate surrogates with a predictive std, cross-validated choice,
 uncertainty maps and the recommendation's margin: on synthetic data whose truth is known."""
 
+import re
 import runpy
 
 import numpy as np
@@ -8,15 +9,21 @@ import pandas as pd
 import pytest
 from conftest import synthetic_dataset, synthetic_metrics
 
-from analysis.maps import render_maps
-from analysis.model_choice import (DEFAULT_CHOICE, GPSurrogate, MLPEnsemble, TreeEnsemble,
-                                   choose_model, cross_validate_models, make_candidate,
-                                   model_choice_markdown, read_choice, write_model_choice)
-from analysis.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown
-from analysis.recommend import main, recommend
-from analysis.surrogate import (METRICS, inputs_of, point_folds, point_groups, point_means,
-                                predict_grid, predict_with_std, save_surrogate, split_runs,
-                                targets_of)
+from analysis.metrics.dataset import METRICS, point_groups, point_means
+from analysis.metrics.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown
+from analysis.surrogate.candidates import GPSurrogate, MLPEnsemble, TreeEnsemble, make_candidate
+from analysis.surrogate.data import inputs_of, point_folds, split_runs, targets_of
+from analysis.surrogate.persistence import save_surrogate
+from analysis.surrogate.predict import predict_grid, predict_with_std
+from analysis.surrogate.recommend import main, recommend
+from analysis.surrogate.selection import (
+    choose_model,
+    cross_validate_models,
+    model_choice_markdown,
+    read_choice,
+    write_model_choice,
+)
+from analysis.viz.maps import render_maps
 
 NOISE = 0.05          # relative std of the synthetic runs' noise
 
@@ -60,13 +67,16 @@ def test_replicates_of_a_point_never_straddle_train_and_test():
         assert len(te) % 3 == 0
 
 
-def test_one_replicate_split_is_the_plain_row_split(dataset):
-    from sklearn.model_selection import KFold, train_test_split
-    _, test = train_test_split(np.arange(45), test_size=10, random_state=0)
-    assert split_runs(dataset, 10, 0)[1].tolist() == sorted(test)
-    plain = list(KFold(5, shuffle=True, random_state=2).split(np.arange(45)))
-    for (a_tr, a_te), (b_tr, b_te) in zip(point_folds(dataset, 5, 2), plain):
-        assert a_te.tolist() == sorted(b_te)
+def test_folds_test_every_point_exactly_once():
+    df = replicated(2, 0.02)
+    groups = point_groups(df)
+    folds = point_folds(df, 5, 2)
+    tested = np.concatenate([te for _, te in folds])
+    assert sorted(tested) == list(range(len(df)))              # a partition of the runs
+    assert all(len(np.unique(groups[te])) == 9 for _, te in folds)   # 45 points / 5 folds
+    assert [te.tolist() for _, te in folds] != [te.tolist() for _, te in point_folds(df, 5, 3)]  # seeded
+    loo = point_folds(df, 45, 0)
+    assert len(loo) == 45 and all(len(np.unique(groups[te])) == 1 for _, te in loo)
 
 
 def test_point_means_average_the_replicates():
@@ -98,7 +108,7 @@ def test_noise_floor_recovers_the_known_noise():
         # MAPE of a perfect model = E|eps| = sqrt(2/pi) x relative noise
         assert c["MAPE_floor_pct"] == pytest.approx(100 * rel * np.sqrt(2 / np.pi), rel=0.2), m
         assert 0 < c["R2_max"] < 1 and c["R_max"] == pytest.approx(np.sqrt(c["R2_max"]))
-    assert "| **pooled** | 180 |" in noise_floor_markdown(table)
+    assert re.search(r"^\| \*\*pooled\*\* +\| 180 +\|", noise_floor_markdown(table), re.M)
 
 
 def test_no_noise_floor_without_replicates(dataset):
@@ -176,7 +186,7 @@ def cv_small(fit_params):
         return synthetic_metrics(U, omega)
     df = replicated(2, 0.03, metrics=metrics)
     df = df[df.omega_rad_s.isin([-20, -10, 0, 10, 20])].reset_index(drop=True)   # 25 points
-    params = {**fit_params, **DEFAULT_CHOICE, "hidden_units": 50, "mlp_members": 2,
+    params = {**fit_params, "hidden_units": 50, "mlp_members": 2,
               "cv_repeats": 2, "cv_folds": 5, "gp_restarts": 0, "tree_count": 50}
     return df, params, cross_validate_models(df, params)
 
@@ -228,7 +238,8 @@ def test_ties_go_to_the_first_listed_model():
 def test_markdown_puts_the_noise_ceiling_beside_the_scores(cv_small):
     df, params, table = cv_small
     text = model_choice_markdown(table, "gp", accuracy_ceiling(df), "smoke")
-    assert "| **gp** | kfold |" in text and "| *noise ceiling* | replicates |" in text
+    assert re.search(r"^\| \*\*gp\*\* +\| kfold +\|", text, re.M)
+    assert re.search(r"^\| \*noise ceiling\* +\| replicates +\|", text, re.M)
     assert "not measured" in model_choice_markdown(table, "gp", None)
 
 
@@ -241,7 +252,7 @@ def test_scripts_write_noise_floor_and_model_choice(tmp_path, fake_snakemake, fi
                          {"level": "smoke"})
     runpy.run_path(str(smk.scriptdir / "noise_floor.py"), init_globals={"snakemake": smk})
     assert len(pd.read_csv(tmp_path / "nf.csv")) == 15 + 1
-    params = {**fit_params, **DEFAULT_CHOICE, "models": ["gp", "trees"], "cv_repeats": 1,
+    params = {**fit_params, "models": ["gp", "trees"], "cv_repeats": 1,
               "cv_folds": 3, "cv_loo": False, "tree_count": 20}
     smk = fake_snakemake({"dataset": str(tmp_path / "dataset.csv")},
                          {"csv": str(tmp_path / "mc.csv"), "md": str(tmp_path / "mc.md")},

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from analysis.config import load_config, scene
-from analysis.run_liggghts import mpi_command
+from analysis.dem.liggghts import mpi_command
 
 pytestmark = pytest.mark.xdist_group("profiles")
 

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from conftest import synthetic_dataset
 
-from analysis.recommend import main, recommend
-from analysis.surrogate import fit_surrogate, save_surrogate
+from analysis.surrogate.network import fit_surrogate
+from analysis.surrogate.persistence import save_surrogate
+from analysis.surrogate.recommend import main, recommend
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -107,7 +108,7 @@ def test_cli_missing_model_exits_2(tmp_path, capsys):
 
 
 def test_runs_as_a_module(model_file):
-    done = subprocess.run([sys.executable, "-m", "analysis.recommend", "--max-porosity", "34",
+    done = subprocess.run([sys.executable, "-m", "analysis.surrogate.recommend", "--max-porosity", "34",
                            "--model", str(model_file)], cwd=ROOT, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert "Highest predicted throughput with porosity <= 34 %" in done.stdout

@@ -8,7 +8,7 @@ import pytest
 import pyvista
 from PIL import Image
 
-from analysis.render import render_top_view, write_vtk
+from analysis.viz.views import render_top_view, write_vtk
 
 # 7 particles in m: six in a 1 mm x 0.6 mm sampling region, one far outside.
 DUMP = """\
@@ -34,8 +34,8 @@ REGION = (0.0, 0.001, 0.0, 0.0006)          # xmin, xmax, ymin, ymax [m]
 
 @pytest.fixture
 def frame(tmp_path):
-    """The dump read by analysis.dump.read_dump."""
-    read_dump = pytest.importorskip("analysis.dump").read_dump
+    """The dump read by analysis.metrics.dump.read_dump."""
+    read_dump = pytest.importorskip("analysis.metrics.dump").read_dump
     path = tmp_path / "final.dump"
     path.write_text(DUMP)
     return read_dump(path)

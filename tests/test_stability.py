@@ -9,10 +9,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.dataset import SupplyLimitedError, UnsoundRunError, check_run
-from analysis.run_liggghts import LiggghtsError
-from analysis.simulate import (BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR, check_kinetic_energy, make_geometry,
-                               settle, squeeze_out_speed, through_roller)
+from analysis.dem.health import (
+    BLOWUP_FLOOR_M_S,
+    BLOWUP_SPEED_FACTOR,
+    check_kinetic_energy,
+    squeeze_out_speed,
+    through_roller,
+)
+from analysis.dem.liggghts import LiggghtsError
+from analysis.dem.simulate import make_geometry, settle
+from analysis.metrics.dataset import SupplyLimitedError, UnsoundRunError, check_run
 
 pytestmark = pytest.mark.xdist_group("liggghts_smoke")
 

@@ -12,12 +12,14 @@ import sklearn
 from conftest import synthetic_dataset
 from sklearn.exceptions import ConvergenceWarning
 
-from analysis.model_choice import (DEFAULT_CHOICE, GPSurrogate, cross_validate_models,
-                                   write_model_choice)
-from analysis.surrogate import (DEFAULT_SURROGATE, METRICS, R_TARGET, deviation_from_paper,
-                                fit_surrogate, hybrid_indices, inputs_of, load_surrogate,
-                                predict_grid, read_split, regression_scores, save_surrogate,
-                                split_runs, split_table)
+from analysis.metrics.dataset import METRICS
+from analysis.surrogate.candidates import GPSurrogate
+from analysis.surrogate.data import inputs_of, read_split, split_runs, split_table
+from analysis.surrogate.network import deviation_from_paper, fit_surrogate
+from analysis.surrogate.persistence import load_surrogate, save_surrogate
+from analysis.surrogate.predict import hybrid_indices, predict_grid
+from analysis.surrogate.scores import R_TARGET, regression_scores
+from analysis.surrogate.selection import cross_validate_models, write_model_choice
 
 
 def test_split_is_35_10_seeded_and_reproducible(dataset):
@@ -64,9 +66,9 @@ def test_scores_structure_and_json(fitted, dataset):
     json.dumps(scores, allow_nan=False)          # strictly valid JSON
 
 
-def test_papers_literal_adam_setting_does_not_converge(dataset):
+def test_papers_literal_adam_setting_does_not_converge(dataset, fit_params):
     """Why the default deviates: adam at learning rate 1e-4 in 200 epochs."""
-    literal = {**DEFAULT_SURROGATE, "solver": "adam", "learning_rate_init": 1e-4, "max_iter": 200}
+    literal = {**fit_params, "solver": "adam", "learning_rate_init": 1e-4, "max_iter": 200}
     with pytest.warns(ConvergenceWarning, match="did not converge"):
         _, scores = fit_surrogate(dataset, literal)
     assert scores["fit"]["converged"] is False
@@ -78,8 +80,8 @@ def test_papers_literal_adam_setting_does_not_converge(dataset):
     assert "as the paper's Table 2" in scores["deviation_from_paper"]
 
 
-def test_default_deviation_is_stated():
-    text = deviation_from_paper(DEFAULT_SURROGATE)
+def test_default_deviation_is_stated(fit_params):
+    text = deviation_from_paper(fit_params)
     assert "solver='lbfgs'" in text and "adam" in text and "does not converge" in text
 
 
@@ -158,7 +160,7 @@ def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
     cross-validation (here a GP, from a model_choice.csv naming it)."""
     data = synthetic_dataset(0, noise=0.01)
     data.to_csv(tmp_path / "dataset.csv", index=False)
-    params = {**fit_params, **DEFAULT_CHOICE, "grid_points": 11, "models": ["gp"],
+    params = {**fit_params, "grid_points": 11, "models": ["gp"],
               "cv_repeats": 1, "cv_loo": False}
     write_model_choice(cross_validate_models(data, params), "gp", tmp_path / "choice.csv",
                        tmp_path / "choice.md")
@@ -185,3 +187,20 @@ def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
     assert meta["split"]["test"] == split.index[split["set"] == "test"].tolist()
     log = (tmp_path / "rule.log").read_text()
     assert "converged" in log and "chosen by cross-validation: gp" in log
+
+
+def test_hybrid_indices_against_hand_computed_values():
+    """Figure 10's indices for three settings worked by hand: throughput index
+    Q_s/max(Q_s) * M_s/max(M_s), defect index R_q/max(R_q) * Phi/max(Phi)."""
+    frame = pd.DataFrame({"mass_g": [0.010, 0.020, 0.005], "throughput_mm2_s": [20.0, 10.0, 40.0],
+                          "roughness_um": [80.0, 100.0, 120.0], "porosity_pct": [60.0, 30.0, 45.0]})
+    throughput, defect = hybrid_indices(frame)
+    # maxima: M_s 0.020, Q_s 40, R_q 120, Phi 60
+    assert throughput == pytest.approx([0.5 * 0.5, 0.25 * 1.0, 1.0 * 0.25])
+    assert defect == pytest.approx([(80 / 120) * 1.0, (100 / 120) * 0.5, 1.0 * 0.75])
+    # against the maxima of a whole map instead of this frame's
+    maxima = {"mass_g": 0.04, "throughput_mm2_s": 80.0, "roughness_um": 160.0, "porosity_pct": 90.0}
+    throughput, defect = hybrid_indices(frame.iloc[:1], maxima)
+    assert throughput == pytest.approx([0.25 * 0.25]) and defect == pytest.approx([0.5 * (60 / 90)])
+    with pytest.raises(ValueError, match="non-positive maximum: mass_g"):
+        hybrid_indices(frame, {**maxima, "mass_g": 0.0})

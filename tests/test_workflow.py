@@ -8,28 +8,29 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
+from PIL import Image
 
 from tests.test_config import ROOT
 
 pytestmark = pytest.mark.xdist_group("workflow")
 
-OMEGAS = [-10, 0, 5]  # the fed smoke pile lasts under forward rolling too
-FIRST_U = [85, 100]
-#: 4 x the smoke scene's seed-to-seed standard deviation at U = 100 mm/s, omega = 0
-#: (4 heap packings, benchmarks/measured/noise_smoke.csv), in the dataset's units
+TEST_CONFIG = yaml.safe_load((ROOT / ".test/config.yaml").read_text())
+OMEGAS = TEST_CONFIG["sweep"]["omega_rad_s"]
+FIRST_U = TEST_CONFIG["sweep"]["U_mm_s"]
 SEED_SPREAD = {"mass_g": 4 * 7e-5, "throughput_mm2_s": 4 * 0.91, "roughness_um": 4 * 3.8, "porosity_pct": 4 * 0.96}
 
 
 def snakemake_cmd(workdir, U, *extra):
-    sweep = json.dumps({"U_mm_s": U, "omega_rad_s": OMEGAS, "replicates": 1})
+    """Snakemake on the CI's config (.test/config.yaml) in ``workdir``, at speeds ``U`` (mm/s)."""
+    sweep = json.dumps({"U_mm_s": U})
     return [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-d", str(workdir),
-            "--configfile", str(ROOT / "config.yaml"), "--cores", "2", "--rerun-incomplete",
-            "--config", "level=smoke", f"sweep={sweep}", 'surrogate={"n_test": 2, "cv_folds": 3, "cv_repeats": 1, "mlp_members": 2}', *extra]
+            "--configfile", str(ROOT / "config.yaml"), str(ROOT / ".test/config.yaml"), "--cores", "2",
+            "--rerun-incomplete", "--config", f"sweep={sweep}", *extra]
 
 
 @pytest.fixture(scope="module")
@@ -96,11 +97,24 @@ def test_surrogate_scores_maps_and_grid_are_made(workflow):
     for part in ("train", "test", "cv"):
         assert set(scores[part]) == {"mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"}
     assert scores["split"]["n_test"] == 2 and scores["split"]["n_train"] == 4
+    for part in ("train", "test", "cv"):
+        assert all(-1 <= s["R"] <= 1 for s in scores[part].values() if s["R"] is not None), part
     grid = pd.read_csv(out / "surrogate/grid.csv")
     assert {"U_mm_s", "omega_rad_s", "throughput_index", "defect_index"} <= set(grid.columns)
+    # the grid spans the swept speeds; the indices are products of two ratios to the grid's maxima
+    assert (grid.U_mm_s.min(), grid.U_mm_s.max()) == (min(FIRST_U), max(FIRST_U))
+    assert (grid.omega_rad_s.min(), grid.omega_rad_s.max()) == (min(OMEGAS), max(OMEGAS))
+    for index in ("throughput_index", "defect_index"):
+        assert grid[index].between(0, 1 + 1e-9).all() and grid[index].max() > 0.1, index
+    # the predicted metrics stay within a factor of the simulated ones
+    data = pd.read_csv(out / "dataset.csv")
+    for m in ("mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"):
+        assert data[m].min() / 3 < grid[m].median() < 3 * data[m].max(), m
     for name in ["process_map", "mass_g_surface", "porosity_pct_parity"]:
-        assert (out / "maps" / f"{name}.png").stat().st_size > 5000
-        assert (out / "maps" / f"{name}.svg").exists()
+        with Image.open(out / "maps" / f"{name}.png") as png:
+            assert png.size[0] >= 600 and png.size[1] >= 400, (name, png.size)
+            assert len(png.convert("L").getcolors(1 << 16) or []) > 50, name   # a drawing, not a blank
+        assert "<svg" in (out / "maps" / f"{name}.svg").read_text()[:2000]
     # Figure 4's top views: fastest U, the swept omegas nearest -5, 0 and +5 rad/s
     assert {p.stem for p in out.glob("top_views/*.png")} == {"U100_w-10_r0", "U100_w0_r0", "U100_w5_r0"}
     assert len(list(out.glob("runs/*/final.vtp"))) == len(FIRST_U) * len(OMEGAS)
@@ -153,11 +167,8 @@ def test_spread_on_two_mpi_ranks_through_the_workflow_matches_one_rank(workflow)
     seed-to-seed spread (benchmarks/measured/noise_smoke.md)."""
     run = workflow / "results/smoke/runs/U100_w0_r0"
     one = json.loads((run / "metrics.json").read_text())
-    sweep = json.dumps({"U_mm_s": FIRST_U, "omega_rad_s": OMEGAS, "replicates": 1})
-    cmd = [sys.executable, "-m", "snakemake", "results/smoke/runs/U100_w0_r0/metrics.json",
-           "-s", str(ROOT / "Snakefile"), "-d", str(workflow), "--configfile", str(ROOT / "config.yaml"),
-           "--cores", "2", "--forcerun", "spread", "--config", "level=smoke", f"sweep={sweep}",
-           'surrogate={"n_test": 2, "cv_folds": 3, "cv_repeats": 1, "mlp_members": 2}', 'fidelity={"smoke": {"mpi_ranks": 2}}']
+    cmd = [*snakemake_cmd(workflow, FIRST_U, 'fidelity={"smoke": {"mpi_ranks": 2}}'), "--forcerun", "spread",
+           "--", "results/smoke/runs/U100_w0_r0/metrics.json"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "rule settle:" not in proc.stderr + proc.stdout         # the same settled heap

@@ -87,7 +87,7 @@ def steady_state_start(profiles: pd.DataFrame, plateau_mm: tuple, k: float = 2.0
 def run_profiles(dumps, runs, density: float, width: float, x_range: tuple) -> pd.DataFrame:
     """Deposit profiles of several runs: ``runs`` is a list of dicts (``U_mm_s``,
     ``omega_rad_s``, ``replicate``), one per dump path in ``dumps``."""
-    from analysis.dump import read_dump
+    from analysis.metrics.dump import read_dump
     tables = [deposit_profile(read_dump(path).atoms, density, width, x_range).assign(**run)
               for path, run in zip(dumps, runs, strict=True)]
     return pd.concat(tables, ignore_index=True)

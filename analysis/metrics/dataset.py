@@ -3,17 +3,32 @@ metrics, extras, cost and health), refusing any run whose health is unsound."""
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from analysis.simulate import MAX_OVERLAP
+from analysis.dem.health import MAX_OVERLAP
+from analysis.io import atomic_path
 
-METRICS = ["mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"]
-HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller", "atoms", "lost", "through_substrate",
-          "through_roller", "max_overlap_fraction", "peak_speed_m_s", "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m", "cpu_s"]
+# The four layer metrics of the paper (eqs. 1-7): dataset column -> (symbol, unit)
+METRICS = {
+    "mass_g": ("M_s", "g"),
+    "throughput_mm2_s": ("Q_s", "mm^2/s"),
+    "roughness_um": ("R_q", "um"),
+    "porosity_pct": ("Phi", "%"),
+}
+
+
+
+#: Input columns and their units.
+INPUTS = {"U_mm_s": "mm/s", "omega_rad_s": "rad/s"}
+
+
+HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller",
+          "atoms", "lost", "through_substrate", "through_roller", "max_overlap_fraction", "peak_speed_m_s",
+          "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction",
+          "roller_travel_m", "cpu_s"]
 
 
 class UnsoundRunError(ValueError):
@@ -70,7 +85,63 @@ def build_dataset(metrics_files, health_files, benchmark_files, out, level: str 
         check_run(row, level, keep_supply_limited)
         rows.append(row)
     table = pd.DataFrame(rows).sort_values(["U_mm_s", "omega_rad_s", "replicate"], ignore_index=True)
-    tmp = Path(f"{out}.tmp")
-    table.to_csv(tmp, index=False)
-    os.replace(tmp, out)
+    with atomic_path(out) as tmp:
+        table.to_csv(tmp, index=False)
     return table
+
+
+def point_groups(df):
+    """Label of each run's (U, omega) point, numbered in order of first appearance.
+
+    Replicates (runs at the same speeds from different heap packings) share a
+    label; with one run per point the labels are ``0 .. n-1`` in row order.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        Has ``U_mm_s`` (mm/s) and ``omega_rad_s`` (rad/s).
+
+    Returns
+    -------
+    numpy.ndarray of int, shape (n_runs,)
+    """
+    keys = df[list(INPUTS)].to_numpy(float)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    rank = np.argsort(np.argsort(first))
+    return rank[inverse.ravel()]
+
+
+def point_means(df, split=None):
+    """One row per (U, omega) point: the replicate mean, std and count of each metric.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        The runs (speeds and the four metrics).
+    split : (array of int, array of int), optional
+        Row positions of the training and test runs (by point, see
+        :func:`split_runs`); mapped to point positions.
+
+    Returns
+    -------
+    points : pandas.DataFrame
+        In order of first appearance: ``U_mm_s``, ``omega_rad_s``,
+        ``n_replicates``, the metric means (their column names) and
+        ``<metric>_sd`` (seed-to-seed standard deviation, ddof 1; 0 for a
+        single run), in the metrics' units.
+    point_split : (array of int, array of int) or None
+        Point positions of the training and test points.
+    """
+    groups = point_groups(df)
+    frame = df[list(INPUTS) + list(METRICS)].assign(_point=groups)
+    grouped = frame.groupby("_point", sort=True)
+    points = grouped[list(INPUTS) + list(METRICS)].mean().reset_index(drop=True)
+    points.insert(2, "n_replicates", grouped.size().to_numpy())
+    sd = grouped[list(METRICS)].std(ddof=1).fillna(0.0).reset_index(drop=True)
+    for m in METRICS:
+        points[f"{m}_sd"] = sd[m].to_numpy()
+    if split is None:
+        return points, None
+    test_points = np.unique(groups[np.asarray(split[1], int)])
+    is_test = np.isin(np.arange(len(points)), test_points)
+    return points, (np.flatnonzero(~is_test), np.flatnonzero(is_test))

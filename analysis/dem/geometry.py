@@ -5,12 +5,13 @@ strip), z up; the substrate's mean plane is z = 0.
 """
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
+import meshio
 import numpy as np
 import trimesh
+
+from analysis.io import write_bytes
 
 
 def gaussian_random_field(nx: int, ny: int, spacing: float, correlation_length: float,
@@ -123,15 +124,36 @@ def roller(diameter: float, length: float, facets: int, capped: bool = True) -> 
 
 
 def write_stl(mesh: trimesh.Trimesh, path: str | Path) -> Path:
-    """Write an ASCII STL atomically (a temp file in the same folder, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".stl.tmp")
-    with os.fdopen(fd, "wb") as f:
-        f.write(trimesh.exchange.stl.export_stl_ascii(mesh).encode())
-    os.replace(tmp, path)
-    return path
+    """Write an ASCII STL atomically (:func:`analysis.io.atomic_path`)."""
+    return write_bytes(trimesh.exchange.stl.export_stl_ascii(mesh).encode(), path)
 
 
 def load_stl(path: str | Path) -> trimesh.Trimesh:
+    """An STL as written by :func:`write_stl` (or LIGGGHTS' mesh input), vertices in m."""
     return trimesh.load_mesh(str(path), file_type="stl", process=False)
+
+
+def load_surface(path: str | Path) -> trimesh.Trimesh:
+    """A user's surface mesh in any format meshio reads (STL, PLY, OBJ, VTK, VTU, ...), in m.
+
+    Only its triangles are kept (a profilometer scan exported as a triangulated
+    surface); quads are split in two. An STL is read by trimesh (meshio 5.3
+    misreads some ASCII STLs). Raises ``ValueError`` naming the file if it
+    cannot be read or holds no triangle or quad.
+    """
+    if Path(path).suffix.lower() == ".stl":
+        try:
+            return load_stl(path)
+        except Exception as err:
+            raise ValueError(f"cannot read the surface mesh {str(path)!r}: {err}") from None
+    try:
+        mesh = meshio.read(str(path))
+    except Exception as err:  # meshio raises its own ReadError, and OS and format errors
+        raise ValueError(f"cannot read the surface mesh {str(path)!r}: {err}") from None
+    faces = [block.data for block in mesh.cells if block.type == "triangle"]
+    faces += [quad[:, [0, 1, 2, 0, 2, 3]].reshape(-1, 3) for quad in
+              (block.data for block in mesh.cells if block.type == "quad")]
+    if not faces:
+        raise ValueError(f"the surface mesh {str(path)!r} holds no triangles or quads "
+                         f"(cells: {', '.join(b.type for b in mesh.cells) or 'none'})")
+    return trimesh.Trimesh(np.asarray(mesh.points, float)[:, :3], np.concatenate(faces), process=False)

@@ -8,7 +8,7 @@ the noise floor, and no surrogate can predict a single run better than it.
 
 :func:`noise_floor` tabulates it per point; :func:`accuracy_ceiling` turns it
 into the best cross-validated scores a perfect model of the mean could reach
-on these runs (compare :mod:`analysis.model_choice`'s table against them).
+on these runs (compare :mod:`analysis.surrogate.selection`'s table against them).
 
 Columns, units: as the dataset (``U_mm_s`` mm/s, ``omega_rad_s`` rad/s,
 ``mass_g`` g, ``throughput_mm2_s`` mm^2/s, ``roughness_um`` um,
@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from analysis.surrogate import INPUTS, METRICS, point_groups, point_means
-from analysis.workflow import atomic_path
+from analysis.io import atomic_path
+from analysis.metrics.dataset import INPUTS, METRICS, point_groups, point_means
 
 #: Row label of the pooled summary in the noise-floor table.
 POOLED = "pooled"
@@ -135,13 +135,13 @@ def noise_floor_markdown(table, level=None):
              "Standard deviation over the replicates (different random heap packings, same "
              "physics) of each metric, and in brackets relative to its mean. The `pooled` row "
              "pools the variances of all points. No surrogate predicts a single run better "
-             "than this.", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * 2 + "---:|" * len(METRICS)]
-    for _, row in table.iterrows():
-        cells = [f"**{row['point']}**" if row["point"] == POOLED else row["point"],
-                 str(int(row["n_replicates"]))]
-        cells += [f"{row[f'{m}_sd']:.3g} ({_pct(row[f'{m}_rel_pct'])})" for m in METRICS]
-        lines.append("| " + " | ".join(cells) + " |")
+             "than this.", ""]
+    cells = pd.DataFrame({
+        head[0]: [f"**{p}**" if p == POOLED else p for p in table["point"]],
+        head[1]: table["n_replicates"].astype(int).astype(str),
+        **{h: [f"{sd:.3g} ({_pct(rel)})" for sd, rel in zip(table[f"{m}_sd"], table[f"{m}_rel_pct"])]
+           for h, m in zip(head[2:], METRICS)}})
+    lines.append(cells.to_markdown(index=False, colalign=["left"] * 2 + ["right"] * len(METRICS)))
     return "\n".join(lines) + "\n"
 
 

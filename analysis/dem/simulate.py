@@ -1,14 +1,14 @@
 """One scene, run for real: make its geometry, settle its heap, spread it.
 
 Each step renders a template from ``templates/``, runs LIGGGHTS through
-:mod:`analysis.run_liggghts` and checks the result's health; an unsound run
-raises :class:`~analysis.run_liggghts.LiggghtsError`, never passes a result on.
+:mod:`analysis.dem.liggghts` and checks the result's health; an unsound run
+raises :class:`~analysis.dem.liggghts.LiggghtsError`, never passes a result on.
 
 Command line (the workflow's rules call the same functions)::
 
-    python -m analysis.simulate geometry --level smoke --out results/smoke/meshes
-    python -m analysis.simulate settle   --level smoke --meshes results/smoke/meshes --out results/smoke/settle
-    python -m analysis.simulate spread   --level smoke --U 70 --omega -5 --meshes ... --settled ... --out ...
+    python -m analysis.dem.simulate geometry --level smoke --out results/smoke/meshes
+    python -m analysis.dem.simulate settle   --level smoke --meshes results/smoke/meshes --out results/smoke/settle
+    python -m analysis.dem.simulate spread   --level smoke --U 70 --omega -5 --meshes ... --settled ... --out ...
 """
 from __future__ import annotations
 
@@ -18,100 +18,49 @@ import json
 import os
 import shutil
 import sys
-from math import ceil, pi, sqrt
+from math import ceil
 from pathlib import Path
 
 import numpy as np
-from scipy.interpolate import LinearNDInterpolator
-from scipy.spatial import cKDTree
 
-from analysis import geometry
-from analysis.config import ConfigError, Scene, liggghts_seeds, load_config, roller_motion, scene
-from analysis.dump import read_dump
-from analysis.run_liggghts import LiggghtsError, render, run
+from analysis.config import ConfigError, Scene, load_config, scene
+from analysis.dem import geometry
+from analysis.dem.health import (
+    MAX_STRAYS,
+    _check_timestep,
+    check_kinetic_energy,
+    heap_supply,
+    layer_health,
+    squeeze_out_speed,
+    through_roller,
+)
+from analysis.dem.inputs import (
+    THERMO_EVERY,
+    binsize,
+    checkpoint_plan,
+    contact_model,
+    feed_plan,
+    feed_zone,
+    processors_grid,
+    rest_loop,
+    seeds,
+    skin,
+    travel_segments,
+)
+from analysis.dem.liggghts import LiggghtsError, render, run
+from analysis.io import write_json
+from analysis.metrics.dump import read_dump
+from analysis.physics import liggghts_seeds, roller_motion
 
-THERMO_EVERY = 1000
-#: A particle counts as "through the substrate" when its centre is this many
-#: radii below the substrate surface under it.
-BELOW_SUBSTRATE_RADII = 0.5
-#: Largest tolerated particle-particle overlap, as a fraction of the smaller
-#: radius: in the sampling region (what is measured), and anywhere. Particles
-#: jammed under the kinematic roller, ahead of the region, are squeezed far
-#: harder (20 % seen at U = 40 mm/s); past 50 % spheres pass through each other.
-MAX_OVERLAP = 0.05
-MAX_OVERLAP_ANYWHERE = 0.5
-#: A run "blows up" when any particle moves faster than the fastest speed a
-#: sound run can give it: at least BLOWUP_FLOOR_M_S (a fall from the top of the
-#: box is under 1 m/s), BLOWUP_SPEED_FACTOR times the fastest wall (U + |omega| R),
-#: and the speed a particle squeezed against a wall to the largest tolerated
-#: overlap (MAX_OVERLAP_ANYWHERE) gets back when the stored Hertz energy is
-#: released (squeeze_out_speed: 5.4 m/s at E = 5 MPa). With a fed pile, sound
-#: runs squeeze single particles out of the roller's nip at up to 2.6 m/s; one
-#: at 0.4 T_R reached 6.65 m/s (under 1 m/s at 0.35 and 0.3 T_R), and unstable
-#: time steps reach 12-34 m/s (benchmarks/measured/stress.md, docs/scene_size.md).
-#: Checked on the thermo output during the run (every THERMO_EVERY steps), not
-#: only on the final state.
-BLOWUP_SPEED_FACTOR = 10
-BLOWUP_FLOOR_M_S = 2.0
-#: Largest share of the heap that may roll ahead, to the sampling region, while
-#: it slumps; these strays are removed before the spread (more: a scene error).
-MAX_STRAYS = 0.01
 #: The generated substrate's peaks are clipped at this fraction of the roller's
 #: gap (3.4 Sq at the configured 300 um gap and Sq 79 um): otherwise the paper
 #: level's large field puts a node through the roller.
 PEAK_CAP = 0.9
+
+
 #: Length [m] over which the rough substrate ramps to flat outside the sampling region.
 ROUGH_TAPER = 0.5e-3
 
-
-def seeds(config: dict, s: Scene, replicate: int = 0) -> list[int]:
-    """LIGGGHTS seeds of a replicate: one per size class, the distribution, the insertion."""
-    return liggghts_seeds(config["random_seed"] + 1000 * replicate, len(s.diameters) + 2)
-
-
-def contact_model(s: Scene) -> str:
-    """The granular contact model: Hertz with tangential history, plus rolling
-    friction and cohesion only where their coefficients are non-zero."""
-    model = "model hertz tangential history"
-    if s.rolling_friction > 0:
-        model += " rolling_friction epsd2"
-    if s.cohesion_energy_density > 0:
-        model += " cohesion sjkr"
-    return model
-
-
-SKIN_DIAMETERS = 0.2
-REST_CHUNK_S = 0.005  # [s] between two at-rest checks
-
-
-def rest_loop(s: Scene, max_time: float, stop_at_rest: bool = True) -> dict:
-    """Template values for ``_until_rest.j2``: chunks of REST_CHUNK_S up to ``max_time``,
-    stopping early (``stop_at_rest``) once the kinetic energy per particle [J] is
-    that of the RMS speed ``rest_rms_speed_mm_s``."""
-    chunk = THERMO_EVERY * max(1, round(REST_CHUNK_S / s.timestep / THERMO_EVERY))
-    return {"chunk_steps": chunk, "max_chunks": max(1, ceil(max_time / (chunk * s.timestep))),
-            "rest_speed": s.rest_speed, "rest_ke": 0.5 * s.mean_particle_mass * s.rest_speed**2,
-            "stop_at_rest": stop_at_rest}
-
-
-def binsize(s: Scene) -> float:
-    """Neighbour bin size [m]: the neighbour cutoff (largest diameter + skin).
-
-    Each rebuild tests every particle in the bins a mesh facet's box touches,
-    and the rotating roller forces a rebuild every ~10-20 steps: these bins
-    are 9 % faster than bins of 4 largest diameters, and LIGGGHTS' own (half
-    the cutoff) 28 % slower than those (benchmarks/measured/spread_profile.md)."""
-    return max(s.diameters) + skin(s)
-
-
-def skin(s: Scene) -> float:
-    """Neighbour-list skin [m]: 20 % of the mean class diameter. Each particle
-    checks every substrate triangle within its radius + skin, every step."""
-    return SKIN_DIAMETERS * float(np.mean(s.diameters))
-
-
-# --------------------------------------------------------------------------
-# Geometry
 
 def substrate_seed(config: dict, replicate: int = 0) -> int:
     """Seed of the substrate's random field for ``replicate``: every replicate is a new
@@ -126,16 +75,20 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
     (its lateral surface, what the periodic strip loads) into ``outdir``.
 
     The generated substrate is realisation :func:`substrate_seed` of ``replicate``.
-    A user's STL (``substrate.stl`` in the config, metres) replaces it for every
+    A user's surface (``substrate.mesh`` in the config, any format meshio reads, metres) replaces it for every
     replicate; it must cover the bed, and no substrate peak may reach the roller.
     """
     s, out = scene(config, level), Path(outdir)
-    if s.substrate["stl"]:
-        substrate = geometry.load_stl(base_dir / s.substrate["stl"])
+    if s.substrate["mesh"]:
+        try:
+            substrate = geometry.load_surface(base_dir / s.substrate["mesh"])
+        except ValueError as err:
+            raise ConfigError(f"config key 'substrate.mesh': {err}") from None
         lo, hi = substrate.bounds
         need = (s.substrate_x[0], s.substrate_x[1], 0.0, s.strip_width)
         if lo[0] > need[0] or hi[0] < need[1] or lo[1] > 1e-9 or hi[1] < s.strip_width - 1e-9:
-            raise ConfigError(f"config key 'substrate.stl' = {s.substrate['stl']!r}: covers x {lo[0]:.4g}..{hi[0]:.4g} m,"
+            raise ConfigError(f"config key 'substrate.mesh' = {s.substrate['mesh']!r}: "
+                              f"covers x {lo[0]:.4g}..{hi[0]:.4g} m,"
                               f" y {lo[1]:.4g}..{hi[1]:.4g} m; the bed needs x {need[0]:.4g}..{need[1]:.4g},"
                               f" y 0..{s.strip_width:.4g} m")
     else:
@@ -162,101 +115,9 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
              "roller_shell": geometry.write_stl(
                  geometry.roller(2 * s.roller_radius, s.strip_width, s.roller_facets, capped=False),
                  out / "roller_shell.stl")}
-    return {**{k: str(v) for k, v in paths.items()}, "substrate_seed": None if s.substrate["stl"] else
+    return {**{k: str(v) for k, v in paths.items()}, "substrate_seed": None if s.substrate["mesh"] else
             substrate_seed(config, replicate), "substrate_mean_m": mean, "substrate_sq_m": sq,
             "substrate_peak_m": float(peak), "substrate_triangles": len(substrate.faces)}
-
-
-def substrate_height(substrate_stl: str | Path):
-    """A vectorised z(x, y) [m] of a height-field STL (linear between its vertices)."""
-    mesh = geometry.load_stl(substrate_stl)
-    xy, inverse = np.unique(mesh.vertices[:, :2].round(12), axis=0, return_inverse=True)
-    z = np.full(len(xy), -np.inf)
-    np.maximum.at(z, inverse.ravel(), mesh.vertices[:, 2])
-    return LinearNDInterpolator(xy, z)
-
-
-# --------------------------------------------------------------------------
-# Health of a finished run
-
-def layer_health(atoms, s: Scene, substrate_stl, expected_atoms: int) -> dict:
-    """Check a final state: lost particles, particles through the substrate,
-    overlaps (in the sampling region and anywhere), kinetic energy.
-    Returns the figures; raises :class:`LiggghtsError` on a failure."""
-    xyz = atoms[["x", "y", "z"]].to_numpy()
-    radius = atoms["radius"].to_numpy()
-    below = (xyz[:, 2] - substrate_height(substrate_stl)(xyz[:, 0], xyz[:, 1])) / radius
-    pairs = cKDTree(xyz, boxsize=None).query_pairs(2 * radius.max(initial=0.0), output_type="ndarray")
-    gaps = np.linalg.norm(xyz[pairs[:, 0]] - xyz[pairs[:, 1]], axis=1) - radius[pairs].sum(1)
-    overlaps = -gaps / radius[pairs].min(1)
-    x0, x1, y0, y1 = s.sampling_region
-    inside = ((xyz[:, 0] >= x0) & (xyz[:, 0] <= x1) & (xyz[:, 1] >= y0) & (xyz[:, 1] <= y1))[pairs].any(1)
-    overlap = np.max(overlaps[inside], initial=0.0)
-    overlap_anywhere = np.max(overlaps, initial=0.0)
-    mass = s.density * 4 / 3 * np.pi * radius**3
-    speed2 = (atoms[["vx", "vy", "vz"]].to_numpy() ** 2).sum(1)
-    health = {"atoms": len(atoms), "lost": expected_atoms - len(atoms),
-              "through_substrate": int(np.sum(np.nan_to_num(below, nan=0.0) < -BELOW_SUBSTRATE_RADII)),
-              "max_overlap_fraction": float(overlap), "max_overlap_anywhere": float(overlap_anywhere),
-              "kinetic_energy_J": float(0.5 * np.sum(mass * speed2)),
-              "max_speed_m_s": float(np.sqrt(speed2.max(initial=0.0)))}
-    problems = []
-    if health["lost"]:
-        problems.append(f"{health['lost']} particles lost (left the box)")
-    if health["through_substrate"]:
-        problems.append(f"{health['through_substrate']} particles fell through the substrate")
-    if overlap > MAX_OVERLAP:
-        problems.append(f"largest overlap in the sampling region {overlap:.1%} of a radius exceeds {MAX_OVERLAP:.0%}")
-    if overlap_anywhere > MAX_OVERLAP_ANYWHERE:
-        problems.append(f"largest overlap {overlap_anywhere:.1%} of a radius exceeds {MAX_OVERLAP_ANYWHERE:.0%}")
-    if not np.all(np.isfinite(xyz)):
-        problems.append("non-finite positions")
-    if problems:
-        raise LiggghtsError("unsound run: " + "; ".join(problems))
-    return health
-
-
-def squeeze_out_speed(density: float, youngs_modulus: float, poisson_ratio: float,
-                      overlap_fraction: float = MAX_OVERLAP_ANYWHERE) -> float:
-    """Speed [m/s] a sphere gets when the Hertz energy of an overlap of
-    ``overlap_fraction`` of its radius against a wall of its own material is
-    released into its translation.
-
-    ``W = 8/15 E* sqrt(r) d^(5/2)`` with ``d = f r`` and ``E* = E / (2 (1 - nu^2))``,
-    over ``m = 4/3 pi rho r^3``: ``v = sqrt(4 E* f^(5/2) / (5 pi rho))``, the same for
-    every radius. SI units.
-    """
-    effective_modulus = youngs_modulus / (2.0 * (1.0 - poisson_ratio**2))
-    return sqrt(4.0 * effective_modulus * overlap_fraction**2.5 / (5.0 * pi * density))
-
-
-def check_kinetic_energy(log: dict, wall_speed: float = 0.0, squeeze_speed: float = 0.0) -> dict:
-    """Refuse a run whose thermo output shows a non-finite kinetic energy or a
-    particle faster than the blow-up limit: the largest of BLOWUP_FLOOR_M_S,
-    BLOWUP_SPEED_FACTOR x ``wall_speed`` [m/s] (the fastest wall, the roller's
-    surface) and ``squeeze_speed`` [m/s] (``squeeze_out_speed``). Returns the
-    peak particle speed [m/s]."""
-    thermo = log["thermo"]
-    limit = max(BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR * wall_speed, squeeze_speed)
-    energy, vmax = thermo["KinEng"].to_numpy(), thermo["vmax"].to_numpy()
-    bad = ~np.isfinite(energy) | ~np.isfinite(vmax)
-    if bad.any():
-        raise LiggghtsError(f"unsound run: kinetic energy not finite at step {int(thermo['Step'][bad].iloc[0])}")
-    fast = vmax > limit
-    if fast.any():
-        first = np.argmax(fast)
-        raise LiggghtsError(f"unsound run: kinetic-energy blow-up, a particle at {vmax[first]:.3g} m/s at step "
-                            f"{int(thermo['Step'].iloc[first])} (limit {limit:.3g} m/s = max({BLOWUP_FLOOR_M_S:g}, "
-                            f"{BLOWUP_SPEED_FACTOR} x the fastest wall's {wall_speed:.3g} m/s, squeeze-out "
-                            f"{squeeze_speed:.3g} m/s)): lower the time step")
-    return {"peak_speed_m_s": float(vmax.max(initial=0.0))}
-
-
-def through_roller(atoms, axis_x: float, axis_z: float, radius: float) -> int:
-    """Particles whose centre is inside the roller (axis along y at ``axis_x``,
-    ``axis_z`` [m], ``radius`` [m]): they passed through its surface."""
-    distance = np.hypot(atoms["x"].to_numpy() - axis_x, atoms["z"].to_numpy() - axis_z)
-    return int(np.sum(distance < radius))
 
 
 def _publish(out: Path, summary: dict, *names: str) -> None:
@@ -264,31 +125,8 @@ def _publish(out: Path, summary: dict, *names: str) -> None:
     ``health.json``: a run killed or refused earlier leaves nothing that looks finished."""
     for name in names:
         os.replace(out / f"{name}.part", out / name)
-    (out / "health.json.part").write_text(json.dumps(summary, indent=2))
-    os.replace(out / "health.json.part", out / "health.json")
+    write_json(summary, out / "health.json")
 
-
-def heap_supply(ahead: int, heap_particles: int) -> dict:
-    """Powder left ahead of the roller when it stops, ``run_out_mm`` past the
-    sampling region (``ahead`` particles of a heap of ``heap_particles``).
-
-    ``supply_margin`` is that share of the heap; none left (``heap_exhausted``)
-    means the heap ran out before the roller reached the end of the sampling
-    region (forward rolling lays several layers and eats a small heap): the
-    layer there is supply-limited, its M_s and Q_s lower bounds of the scene's
-    physics."""
-    return {"particles_ahead_of_roller": int(ahead), "supply_margin": ahead / heap_particles,
-            "heap_exhausted": ahead == 0}
-
-
-def _check_timestep(log: dict, s: Scene) -> None:
-    if log["max_rayleigh_fraction"] > s.max_rayleigh_fraction * (1 + 1e-6):
-        raise LiggghtsError(f"time step is {log['max_rayleigh_fraction']:.3f} of the Rayleigh time, above "
-                            f"timestep.max_rayleigh_fraction = {s.max_rayleigh_fraction}")
-
-
-# --------------------------------------------------------------------------
-# Settle and spread
 
 def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, replicate: int = 0,
            max_steps: int | None = None) -> dict:
@@ -301,7 +139,8 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     out.mkdir(parents=True, exist_ok=True)
     if s.timestep > s.max_rayleigh_fraction * s.rayleigh_time:
         raise LiggghtsError(f"time step {s.timestep:.3g} s exceeds the allowed fraction of the Rayleigh time")
-    text = render("settle.in.j2", s=s, contact=contact_model(s), seeds=seeds(config, s, replicate), box=[f"{v:.6g}" for v in s.box],
+    text = render("settle.in.j2", s=s, contact=contact_model(s), seeds=seeds(config, s, replicate),
+                  box=[f"{v:.6g}" for v in s.box],
                   processors=processors_grid(s),
                   skin=skin(s), binsize=binsize(s), thermo_every=THERMO_EVERY,
                   **(rest_loop(s, s.settle_time) if max_steps is None else
@@ -348,25 +187,6 @@ def roller_start(atoms, s: Scene, clearance: float | None = None) -> float:
 CHECKPOINT_DIR = "checkpoint"
 
 
-def processors_grid(s: Scene) -> str:
-    """LIGGGHTS ``processors`` grid for ``s.mpi_ranks`` ranks.
-
-    The powder is a thin bed under a box as tall as the roller, so z is never
-    split. LIGGGHTS 3.8 has no load balancing (no ``balance`` command), and
-    along the travel the particles crowd into the heap: a cut across x leaves
-    ranks idle. A narrow periodic strip is uniform across its width, so it is
-    cut across y into equal shares, each at least the ghost cutoff (largest
-    diameter + skin) wide; a wide scene (the paper level) lets LIGGGHTS
-    choose the grid in x and y.
-    """
-    slab = max(s.diameters) + skin(s)  # the ghost cutoff
-    if s.mpi_ranks <= 1:
-        return "1 1 1"
-    if s.strip_width / s.mpi_ranks >= slab and s.strip_width < 0.1 * (s.box[1] - s.box[0]):
-        return f"1 {s.mpi_ranks} 1"
-    return "* * 1"
-
-
 def _checkpoints(out: Path, fingerprint: str) -> list[tuple[int, Path]]:
     """(step, restart file) of an earlier, killed attempt at this same input, newest first."""
     folder = out / CHECKPOINT_DIR
@@ -377,65 +197,14 @@ def _checkpoints(out: Path, fingerprint: str) -> list[tuple[int, Path]]:
     return sorted(found, reverse=True)
 
 
-def checkpoint_plan(travel_steps: int, count: int, resume_step: int = 0) -> list[tuple[int, int | None]]:
-    """(step, previous checkpoint's step) of the checkpoints still to write after ``resume_step``:
-    ``count`` evenly spaced over the travel (none at its end)."""
-    if not count:
-        return []
-    every = ceil(travel_steps / (count + 1))
-    steps = [k * every for k in range(1, count + 1) if resume_step < k * every < travel_steps]
-    return list(zip(steps, [resume_step or None] + steps[:-1]))
-
-
-#: Travel [m] of the roller between two top-ups of a fed pile (``feed_pile_mg_per_mm``):
-#: the pile dips by at most the layer laid over it (about 2 % of a 20 mg/mm pile).
-FEED_EVERY = 0.5e-3
-
-
-def feed_plan(s: Scene, x0: float, speed: float, travel_steps: int, heap_toe: float) -> list[int]:
-    """Steps of the travel at which a fed pile is topped up: every :data:`FEED_EVERY`
-    of travel, from the step at which the feed zone (``s.feed_length`` ahead of the
-    roller axis, which starts at ``x0`` [m]) first covers the settled heap's toe
-    ``heap_toe`` [m], so the heap itself is counted before anything is added.
-    Empty without a feed."""
-    if s.feed_pile_mass is None:
-        return []
-    every = max(1, round(FEED_EVERY / (speed * s.timestep)))
-    first = max(0, ceil((heap_toe - s.feed_length - x0) / (speed * s.timestep)))
-    return list(range(first, travel_steps, every))
-
-
-def feed_zone(s: Scene, x_axis: float, floor: float) -> dict:
-    """The feed zone [m] when the roller axis is at ``x_axis``: a block from the axis
-    to ``s.feed_length`` ahead, from ``floor`` (above the substrate's highest point)
-    to the roller's height there, less a cylinder of the roller's radius plus the
-    largest particle's (nothing is inserted into the roller or the substrate)."""
-    r = s.roller_radius
-    top = s.roller_gap + r - sqrt(r**2 - s.feed_length**2)
-    return {"x0": x_axis, "x1": x_axis + s.feed_length, "z0": floor, "z1": top,
-            "axis_z": s.roller_gap + r, "radius": r + max(s.diameters) / 2}
-
-
-def travel_segments(travel_steps: int, checkpoints: list, feeds: list, resume_step: int = 0) -> list[dict]:
-    """The travel after ``resume_step`` cut at every checkpoint and feed step: a list of
-    ``{"end", "feed", "checkpoint"}`` in order; ``feed`` is true if the pile is topped up at
-    the segment's start, ``checkpoint`` the ``(step, previous)`` written at its end or None."""
-    at_end = {step: (step, previous) for step, previous in checkpoints}
-    feeds = [f for f in feeds if f >= resume_step]
-    cuts = sorted(set(at_end) | {f for f in feeds if f > resume_step} | {travel_steps})
-    segments, start = [], resume_step
-    for end in cuts:
-        segments.append({"start": start, "end": end, "feed": start in feeds, "checkpoint": at_end.get(end)})
-        start = end
-    return segments
-
-
 #: What a spreading run leaves out because its scene does not need it (README:
 #: skips): the wait for a fixed duration once the layer is at rest, the powder
 #: pushed past the stopped roller, and every dump but the final one. (Settling
 #: once per replicate is the workflow's: rules/simulate.smk.) The empty set is
 #: the "no skips" baseline of benchmarks/bench_skips.py.
 SKIPS = frozenset({"stop_at_rest", "remove_ahead", "final_dump_only"})
+
+
 #: Dump interval [s of simulated time] of the baseline without ``final_dump_only``.
 BASELINE_DUMP_EVERY_S = 0.002
 
@@ -555,8 +324,6 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     shutil.rmtree(out / CHECKPOINT_DIR, ignore_errors=True)
     return summary
 
-
-# --------------------------------------------------------------------------
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description="Run one step of a spreading scene with LIGGGHTS.")

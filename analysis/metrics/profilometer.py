@@ -9,7 +9,7 @@ fused layer) and ``h`` the top of the spread layer, i.e. the highest of
 particle lies, the paper's h_3 = b_3).
 
 Units are SI throughout (m, kg, s); ``to_report_units`` and the command line
-convert to mm, um, g and mm/s. Run ``python -m analysis.layer_metrics -h``
+convert to mm, um, g and mm/s. Run ``python -m analysis.metrics.profilometer -h``
 for the command line.
 """
 
@@ -18,14 +18,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from analysis.dump import read_dump
+from analysis.io import write_text
+from analysis.metrics.dump import read_dump
 
 __all__ = [
     "probe_lines",
@@ -40,6 +39,7 @@ __all__ = [
     "to_report_units",
     "main",
 ]
+
 
 #: Number of (object, probe) pairs handled at once: bounds the working memory
 #: (about 100 bytes a pair) without slowing the NumPy loops.
@@ -270,7 +270,7 @@ def spread_layer_metrics(atoms_or_frame, region, speed, density, substrate=None,
 
     Parameters
     ----------
-    atoms_or_frame : pandas.DataFrame or analysis.dump.Frame
+    atoms_or_frame : pandas.DataFrame or analysis.metrics.dump.Frame
         Particles with columns ``x, y, z, radius`` [m]. A Frame's box is
         checked to contain the region.
     region : tuple of float
@@ -412,7 +412,7 @@ def main(argv=None):
     text = json.dumps(to_report_units(metrics), indent=2)
     print(text)
     if args.json:
-        _write_atomic(args.json, text + "\n")
+        write_text(text + "\n", args.json)
     return 0
 
 
@@ -545,24 +545,9 @@ def _mesh_top(triangles, xs, ys):
     return top
 
 
-def _write_atomic(path, text):
-    """Write ``text`` to ``path`` via a temporary file and ``os.replace``."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
-
-
 def _parser():
     p = argparse.ArgumentParser(
-        prog="python -m analysis.layer_metrics",
+        prog="python -m analysis.metrics.profilometer",
         description="Spread-layer metrics (mass, throughput, roughness, porosity) of a LIGGGHTS dump frame.",
     )
     p.add_argument("dump", help="LIGGGHTS dump custom file (SI, m), optionally gzipped")

@@ -2,14 +2,14 @@
 
 Usage::
 
-    python -m analysis.recommend --max-porosity 45 [--max-roughness 60] [--margin 1] \\
+    python -m analysis.surrogate.recommend --max-porosity 45 [--max-roughness 60] [--margin 1] \\
         [--model results/default/surrogate/model.joblib] [--grid-points 201]
 
 Prints the (U, omega) inside the swept range (stored with the model) whose
 predicted spread throughput Q_s is highest among the speeds whose predicted
 porosity (%) and, if given, roughness (um) are within the limits, with the
 four predicted metrics and their predictive standard deviation.  When the
-model gives one (:func:`analysis.surrogate.provides_std`), a setting must meet
+model gives one (:func:`analysis.surrogate.predict.provides_std`), a setting must meet
 the limits with a margin: predicted mean + K x std <= limit (``--margin K``,
 default 1), so the answer prefers settings the surrogate is sure of.  Exit
 status: 0 found, 1 no speeds meet the limits (or none with the margin: the
@@ -24,7 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.surrogate import METRICS, load_surrogate, predict_grid, provides_std
+from analysis.metrics.dataset import METRICS
+from analysis.surrogate.persistence import load_surrogate
+from analysis.surrogate.predict import predict_grid, provides_std
 
 DEFAULT_MODEL = "results/default/surrogate/model.joblib"
 
@@ -139,7 +141,7 @@ class _Parser(argparse.ArgumentParser):
 
 def main(argv=None):
     """Command-line entry; returns the exit status."""
-    parser = _Parser(prog="python -m analysis.recommend", description=__doc__.split("\n\n")[0])
+    parser = _Parser(prog="python -m analysis.surrogate.recommend", description=__doc__.split("\n\n")[0])
     parser.add_argument("--max-porosity", type=float, required=True, metavar="PCT",
                         help="highest acceptable spread-layer porosity, %%")
     parser.add_argument("--max-roughness", type=float, metavar="UM",

@@ -7,7 +7,7 @@ coloured by its diameter, as the paper's Figure 4.  Rendering is off-screen
 (EGL unless ``VTK_DEFAULT_OPENGL_WINDOW`` says otherwise), so no display is
 needed.
 
-A frame is what :func:`analysis.dump.read_dump` returns: ``frame.atoms``, a
+A frame is what :func:`analysis.metrics.dump.read_dump` returns: ``frame.atoms``, a
 DataFrame with columns ``x, y, z, radius`` (m) and optionally ``id, type,
 vx, vy, vz`` (m/s), and ``frame.box``, the (3, 2) box bounds in m.
 """
@@ -22,7 +22,7 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 import pyvista  # noqa: E402  (after the render-window choice)
 from vtkmodules.vtkCommonDataModel import vtkPlane  # noqa: E402
 
-from analysis.workflow import atomic_path  # noqa: E402
+from analysis.io import atomic_path
 
 pyvista.OFF_SCREEN = True
 
@@ -62,7 +62,7 @@ def write_vtk(frame, path):
 
     Parameters
     ----------
-    frame : analysis.dump.Frame
+    frame : analysis.metrics.dump.Frame
         Particles in m (see the module docstring).
     path : str or pathlib.Path
         Output ``.vtp`` file, written atomically.  Field data ``box_m`` holds
@@ -88,7 +88,7 @@ def render_top_view(frame, region, path, clim=None, long_side_px=1600, sphere_re
 
     Parameters
     ----------
-    frame : analysis.dump.Frame
+    frame : analysis.metrics.dump.Frame
         Particles in m.
     region : sequence of 4 float
         Sampling region ``(xmin, xmax, ymin, ymax)`` in m (also accepted as

@@ -36,12 +36,18 @@ import pandas as pd
 
 __all__ = ["DumpError", "Frame", "read_dump", "write_dump"]
 
+
 #: Columns a dump must have for the spread-layer analysis.
 REQUIRED_COLUMNS = ("x", "y", "z", "radius")
 
+
 _GZIP_MAGIC = b"\x1f\x8b"
+
+
 # One match per frame: group 1 is the timestep value.
 _FRAME_START = re.compile(rb"ITEM: TIMESTEP[ \t]*\r?\n[ \t]*(\S+)")
+
+
 _HEADER_LINES = 9  # TIMESTEP, value, NUMBER OF ATOMS, N, BOX BOUNDS, 3 bounds, ATOMS
 
 
@@ -135,7 +141,8 @@ def write_dump(path, atoms, box, timestep=0, append=False, periodic=(False, True
     bounds = "\n".join(f"{lo!r} {hi!r}" for lo, hi in box.tolist())
     header = (
         f"ITEM: TIMESTEP\n{int(timestep)}\nITEM: NUMBER OF ATOMS\n{len(atoms)}\n"
-        f"ITEM: BOX BOUNDS {' '.join('pp' if p else 'ff' for p in periodic)}\n{bounds}\nITEM: ATOMS {' '.join(atoms.columns)} \n"
+        f"ITEM: BOX BOUNDS {' '.join('pp' if p else 'ff' for p in periodic)}\n{bounds}\n"
+        f"ITEM: ATOMS {' '.join(atoms.columns)} \n"
     )
     body = atoms.to_csv(sep=" ", header=False, index=False, lineterminator="\n")
     mode = "at" if append else "wt"

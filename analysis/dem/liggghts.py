@@ -9,7 +9,7 @@ Traps of the Debian LIGGGHTS 3.8 build that this module guards against:
 * parallel runs in one folder would all write ``log.liggghts``: every run
   gets its own ``-log``.
 
-Command line: ``python -m analysis.run_liggghts INPUT [--np N] [--log FILE]``
+Command line: ``python -m analysis.dem.liggghts INPUT [--np N] [--log FILE]``
 runs an input file and prints its health as JSON.
 """
 from __future__ import annotations
@@ -29,10 +29,15 @@ import jinja2
 import numpy as np
 import pandas as pd
 
-from analysis.config import is_prime
+from analysis.config import PROJECT_DIR
+from analysis.physics import is_prime
 
-TEMPLATES = Path(__file__).resolve().parent.parent / "templates"
+TEMPLATES = PROJECT_DIR / "templates"
+
+
 LIGGGHTS = os.environ.get("SPREADMAP_LIGGGHTS", "liggghts")
+
+
 _SEED_PATTERNS = [r"particletemplate/sphere\s+(\S+)", r"particledistribution/discrete\S*\s+(\S+)",
                   r"\bseed\s+(\S+)"]
 

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis import geometry
 from analysis.config import Scene
-from analysis.run_liggghts import render, run
-from analysis.simulate import contact_model, skin
+from analysis.dem import geometry
+from analysis.dem.inputs import contact_model, skin
+from analysis.dem.liggghts import render, run
 
 GRAVITY = 9.81
 

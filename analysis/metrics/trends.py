@@ -1,20 +1,19 @@
 """The paper's section-3 statements, checked against a dataset.
 
-``python -m analysis.trends results/default/dataset.csv`` prints a Markdown
+``python -m analysis.metrics.trends results/default/dataset.csv`` prints a Markdown
 table: the paper's statement beside what this dataset shows.
 """
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 import pandas as pd
 
-ROLLER_RADIUS_MM = 15.0
 
+def trend_table(data: pd.DataFrame, roller_radius_mm: float) -> list[tuple[str, str, str]]:
+    """(paper's statement, measured here, agrees?) rows, from replicate means.
 
-def trend_table(data: pd.DataFrame) -> list[tuple[str, str, str]]:
-    """(paper's statement, measured here, agrees?) rows, from replicate means."""
+    ``roller_radius_mm`` (mm) places the roller's bottom point at rest, U = -omega R.
+    """
     mean = data.groupby(["U_mm_s", "omega_rad_s"], as_index=False).mean(numeric_only=True)
     rows = []
     neg, pos = mean[mean.omega_rad_s < 0], mean[mean.omega_rad_s > 0]
@@ -34,17 +33,19 @@ def trend_table(data: pd.DataFrame) -> list[tuple[str, str, str]]:
                  "omega of least R_q per U: " + ", ".join(f"{u:g}: {w:g}" for u, w in argmin.items()),
                  "yes" if near_zero == 1 else "partly" if near_zero >= 0.5 else "no"))
     rows.append(("R_q rises more for negative than positive omega",
-                 f"mean R_q at omega < 0: {neg.roughness_um.mean():.1f} um, at omega > 0: {pos.roughness_um.mean():.1f} um",
+                 f"mean R_q at omega < 0: {neg.roughness_um.mean():.1f} um, "
+                 f"at omega > 0: {pos.roughness_um.mean():.1f} um",
                  "yes" if neg.roughness_um.mean() > pos.roughness_um.mean() else "no"))
     por = mean.pivot(index="U_mm_s", columns="omega_rad_s", values="porosity_pct")
-    bottom = mean.U_mm_s + mean.omega_rad_s * ROLLER_RADIUS_MM
+    bottom = mean.U_mm_s + mean.omega_rad_s * roller_radius_mm
     at_rest = mean.loc[(bottom.abs() <= 25)]
     peak = mean.loc[mean.porosity_pct.idxmax()]
     rows.append(("Phi peaks where the roller's bottom point is at rest (U = -omega R)",
                  f"max Phi {peak.porosity_pct:.1f} % at U = {peak.U_mm_s:g} mm/s, omega = {peak.omega_rad_s:g} rad/s "
-                 f"(bottom speed {peak.U_mm_s + peak.omega_rad_s * ROLLER_RADIUS_MM:+.0f} mm/s); mean Phi where "
-                 f"bottom speed within 25 mm/s: {at_rest.porosity_pct.mean():.1f} %, elsewhere {mean.porosity_pct.mean():.1f} %",
-                 "yes" if abs(peak.U_mm_s + peak.omega_rad_s * ROLLER_RADIUS_MM) <= 25 else "no"))
+                 f"(bottom speed {peak.U_mm_s + peak.omega_rad_s * roller_radius_mm:+.0f} mm/s); mean Phi where "
+                 f"bottom speed within 25 mm/s: {at_rest.porosity_pct.mean():.1f} %, "
+                 f"elsewhere {mean.porosity_pct.mean():.1f} %",
+                 "yes" if abs(peak.U_mm_s + peak.omega_rad_s * roller_radius_mm) <= 25 else "no"))
     rising_phi = np.mean([np.all(np.diff(por[w].to_numpy()) > 0) for w in por.columns])
     rows.append(("Phi increases monotonically with U at constant omega",
                  f"monotonic at {rising_phi:.0%} of the omegas", "yes" if rising_phi >= 0.8 else "no"))
@@ -52,9 +53,7 @@ def trend_table(data: pd.DataFrame) -> list[tuple[str, str, str]]:
 
 
 def markdown(rows) -> str:
-    lines = ["| paper (section 3) | this dataset | agrees |", "|---|---|---|"]
-    return "\n".join(lines + [f"| {a} | {b} | {c} |" for a, b, c in rows])
+    """The rows of :func:`trend_table` as a Markdown table."""
+    return pd.DataFrame(rows, columns=["paper (section 3)", "this dataset", "agrees"]).to_markdown(index=False)
 
 
-if __name__ == "__main__":
-    print(markdown(trend_table(pd.read_csv(sys.argv[1]))))

@@ -6,7 +6,7 @@ surrogate is least sure:
 1. a space-filling start: ``initial_points`` scrambled-Sobol (or Latin
    hypercube) points over the sweep grid's U and omega ranges
    (:func:`initial_design`), seeded;
-2. each round, fit a Gaussian process per metric (:class:`~analysis.model_choice.GPSurrogate`)
+2. each round, fit a Gaussian process per metric (:class:`~analysis.surrogate.candidates.GPSurrogate`)
    to every run so far and choose a batch of ``batch_size`` new points that
    maximise the expected squared prediction error (:func:`choose_batch`,
    after the MEPE criterion of Liu, Xu & Wang, 2017)::
@@ -32,12 +32,12 @@ already simulated (by the grid or an earlier design) is reused.
 
 Command line (the loop through the workflow)::
 
-    python -m analysis.adaptive --level default --name adaptive --cores 2 [--max-runs 15]
+    python -m analysis.surrogate.adaptive --level default --name adaptive --cores 2 [--max-runs 15]
 
 writes ``results/<level>/adaptive/<name>/``: ``design.csv`` (points, round,
 acquisition), ``rounds.csv`` (runs and leave-one-out scores per round),
 ``dataset.csv`` (the design's runs), ``model.joblib`` (the final GP, usable by
-``python -m analysis.recommend --model``) and ``round_<k>.yaml`` (the points
+``python -m analysis.surrogate.recommend --model``) and ``round_<k>.yaml`` (the points
 config each round's Snakemake run used).  Units: U in mm/s, omega in rad/s,
 metrics as the dataset.
 """
@@ -57,12 +57,16 @@ import yaml
 from scipy.linalg import solve_triangular
 from scipy.stats import qmc
 
-from analysis.config import ConfigError, load_config, run_name
-from analysis.model_choice import GPSurrogate
-from analysis.surrogate import INPUTS, METRICS, inputs_of, save_surrogate, targets_of
-from analysis.workflow import atomic_path
+from analysis.config import PROJECT_DIR, ConfigError, load_config, run_name
+from analysis.io import atomic_path
+from analysis.metrics.dataset import INPUTS, METRICS
+from analysis.surrogate.candidates import GPSurrogate
+from analysis.surrogate.data import inputs_of, targets_of
+from analysis.surrogate.persistence import save_surrogate
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = PROJECT_DIR
+
+
 #: acquisition functions of :func:`choose_batch` (``adaptive.acquisition``)
 ACQUISITIONS = ("mepe", "imse")
 
@@ -185,7 +189,7 @@ def choose_batch(gp, X, candidates, batch_size, error_weight=0.5, exclude=None,
 
     Parameters
     ----------
-    gp : analysis.model_choice.GPSurrogate
+    gp : analysis.surrogate.candidates.GPSurrogate
         Fitted on the runs X (all replicates).
     X : numpy.ndarray, shape (n, 2)
         Inputs of the runs it was fitted on (U mm/s, omega rad/s).
@@ -325,7 +329,7 @@ def run_adaptive(evaluate, bounds, settings, *, replicates=1, exclude=None, gp_p
     exclude : array (k, 2), optional
         Points never chosen (a held-out test set).
     gp_params : dict, optional
-        Keyword arguments of :class:`~analysis.model_choice.GPSurrogate`.
+        Keyword arguments of :class:`~analysis.surrogate.candidates.GPSurrogate`.
     on_round : callable, optional
         ``on_round(round_index, data, gp)`` after each fit (e.g. to score
         against held-out runs).
@@ -397,7 +401,7 @@ class WorkflowEvaluator:
     every point so far), asks Snakemake for those runs' ``metrics.json`` (so
     only runs not yet done are simulated: folders are named by speed and
     replicate, and runs of the grid or of other designs are reused) and
-    gathers the requested points' runs with :func:`analysis.dataset.build_dataset`
+    gathers the requested points' runs with :func:`analysis.metrics.dataset.build_dataset`
     (the workflow's own ``results/<level>/dataset.csv`` is left alone).
 
     Parameters
@@ -430,7 +434,7 @@ class WorkflowEvaluator:
                 for r in range(self.replicates)]
 
     def __call__(self, points):
-        from analysis.dataset import build_dataset
+        from analysis.metrics.dataset import build_dataset
         points = np.atleast_2d(np.asarray(points, float))
         known = {tuple(p) for p in self.points}
         self.points += [tuple(p) for p in points if tuple(p) not in known]
@@ -490,7 +494,7 @@ def write_result(result, outdir, level, extra_meta=None):
 
 def main(argv=None):
     """Command line: the adaptive loop through the workflow (module docstring)."""
-    parser = argparse.ArgumentParser(prog="python -m analysis.adaptive",
+    parser = argparse.ArgumentParser(prog="python -m analysis.surrogate.adaptive",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", type=Path, default=ROOT / "config.yaml",
                         help="base config (default: the repository's config.yaml)")

@@ -11,7 +11,7 @@ imported, so no display is needed) and written as PNG and SVG.
 
 Beyond the paper: with replicates the points drawn are the replicate means
 (with their seed-to-seed range), and when the surrogate gives a predictive
-standard deviation (:func:`analysis.surrogate.provides_std`) each regressed
+standard deviation (:func:`analysis.surrogate.predict.provides_std`) each regressed
 surface gets a companion map of it (``<metric>_std``) and the process map
 draws +-1 std crosses along its iso-lines.
 """
@@ -25,10 +25,18 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from analysis.surrogate import (INPUTS, METRICS, hybrid_index_std, hybrid_indices, inputs_of,
-                                metric_maxima, pearson_r, point_means, predict_frame, predict_grid,
-                                provides_std)
-from analysis.workflow import atomic_path
+from analysis.io import atomic_path
+from analysis.metrics.dataset import INPUTS, METRICS, point_means
+from analysis.surrogate.data import inputs_of
+from analysis.surrogate.predict import (
+    hybrid_index_std,
+    hybrid_indices,
+    metric_maxima,
+    predict_frame,
+    predict_grid,
+    provides_std,
+)
+from analysis.surrogate.scores import pearson_r
 
 #: Axis labels with units (matplotlib mathtext).
 LABELS = {
@@ -39,14 +47,22 @@ LABELS = {
     "roughness_um": r"$R_q$ ($\mu$m)",
     "porosity_pct": r"$\Phi$ (%)",
 }
+
+
 TITLES = {
     "mass_g": "Powder mass in the sampling region",
     "throughput_mm2_s": "Spread throughput",
     "roughness_um": "Spread layer roughness",
     "porosity_pct": "Spread layer porosity",
 }
+
+
 FORMATS = ("png", "svg")
+
+
 _STYLE = {"font.size": 11, "axes.titlesize": 12, "axes.labelsize": 11, "savefig.dpi": 150}
+
+
 _TRAIN, _TEST = "blue", "black"
 
 
@@ -87,7 +103,7 @@ def surface_figure(model, df, split, metric, n=41):
     split : (array of int, array of int)
         Row positions of the training and test runs.
     metric : str
-        One of :data:`analysis.surrogate.METRICS`.
+        One of :data:`analysis.surrogate.data.METRICS`.
     n : int
         Surface grid points per axis, over the runs' speed range.
 
@@ -227,7 +243,7 @@ def process_map_lines(model, U_values, omega_values, maxima, n=101):
         The swept speeds (mm/s, rad/s); one line per value, running over the
         range of the other speed.
     maxima : dict
-        Metric maxima to normalise by (:func:`analysis.surrogate.metric_maxima`).
+        Metric maxima to normalise by (:func:`analysis.surrogate.predict.metric_maxima`).
     n : int
         Points per line.
 
@@ -341,7 +357,7 @@ def render_maps(model, df, split, outdir, n=41):
         Fitted surrogate.
     df : pandas.DataFrame
         The simulated runs it was fitted on (replicates are drawn as their
-        mean, :func:`analysis.surrogate.point_means`).
+        mean, :func:`analysis.surrogate.data.point_means`).
     split : (array of int, array of int)
         Row positions of the training and test runs.
     outdir : str or pathlib.Path

@@ -1,0 +1,162 @@
+"""Is a finished LIGGGHTS run sound? Lost, sunk and squeezed-through
+particles, overlaps, kinetic-energy blow-ups against the squeeze-out speed,
+the time step against the Rayleigh time, and the supply still ahead of the
+roller. :mod:`analysis.dem.simulate` calls these after each run and refuses
+an unsound one (:class:`~analysis.dem.liggghts.LiggghtsError`).
+"""
+from __future__ import annotations
+
+from math import pi, sqrt
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import LinearNDInterpolator
+from scipy.spatial import cKDTree
+
+from analysis.config import Scene
+from analysis.dem import geometry
+from analysis.dem.liggghts import LiggghtsError
+
+#: A particle counts as "through the substrate" when its centre is this many
+#: radii below the substrate surface under it.
+BELOW_SUBSTRATE_RADII = 0.5
+
+
+#: Largest tolerated particle-particle overlap, as a fraction of the smaller
+#: radius: in the sampling region (what is measured), and anywhere. Particles
+#: jammed under the kinematic roller, ahead of the region, are squeezed far
+#: harder (20 % seen at U = 40 mm/s); past 50 % spheres pass through each other.
+MAX_OVERLAP = 0.05
+
+
+MAX_OVERLAP_ANYWHERE = 0.5
+
+
+#: A run "blows up" when any particle moves faster than the fastest speed a
+#: sound run can give it: at least BLOWUP_FLOOR_M_S (a fall from the top of the
+#: box is under 1 m/s), BLOWUP_SPEED_FACTOR times the fastest wall (U + |omega| R),
+#: and the speed a particle squeezed against a wall to the largest tolerated
+#: overlap (MAX_OVERLAP_ANYWHERE) gets back when the stored Hertz energy is
+#: released (squeeze_out_speed: 5.4 m/s at E = 5 MPa). With a fed pile, sound
+#: runs squeeze single particles out of the roller's nip at up to 2.6 m/s; one
+#: at 0.4 T_R reached 6.65 m/s (under 1 m/s at 0.35 and 0.3 T_R), and unstable
+#: time steps reach 12-34 m/s (benchmarks/measured/stress.md, docs/scene_size.md).
+#: Checked on the thermo output during the run (every THERMO_EVERY steps), not
+#: only on the final state.
+BLOWUP_SPEED_FACTOR = 10
+
+
+BLOWUP_FLOOR_M_S = 2.0
+
+
+#: Largest share of the heap that may roll ahead, to the sampling region, while
+#: it slumps; these strays are removed before the spread (more: a scene error).
+MAX_STRAYS = 0.01
+
+
+def substrate_height(substrate_stl: str | Path):
+    """A vectorised z(x, y) [m] of a height-field STL (linear between its vertices)."""
+    mesh = geometry.load_stl(substrate_stl)
+    xy, inverse = np.unique(mesh.vertices[:, :2].round(12), axis=0, return_inverse=True)
+    z = np.full(len(xy), -np.inf)
+    np.maximum.at(z, inverse.ravel(), mesh.vertices[:, 2])
+    return LinearNDInterpolator(xy, z)
+
+
+def layer_health(atoms, s: Scene, substrate_stl, expected_atoms: int) -> dict:
+    """Check a final state: lost particles, particles through the substrate,
+    overlaps (in the sampling region and anywhere), kinetic energy.
+    Returns the figures; raises :class:`LiggghtsError` on a failure."""
+    xyz = atoms[["x", "y", "z"]].to_numpy()
+    radius = atoms["radius"].to_numpy()
+    below = (xyz[:, 2] - substrate_height(substrate_stl)(xyz[:, 0], xyz[:, 1])) / radius
+    pairs = cKDTree(xyz, boxsize=None).query_pairs(2 * radius.max(initial=0.0), output_type="ndarray")
+    gaps = np.linalg.norm(xyz[pairs[:, 0]] - xyz[pairs[:, 1]], axis=1) - radius[pairs].sum(1)
+    overlaps = -gaps / radius[pairs].min(1)
+    x0, x1, y0, y1 = s.sampling_region
+    inside = ((xyz[:, 0] >= x0) & (xyz[:, 0] <= x1) & (xyz[:, 1] >= y0) & (xyz[:, 1] <= y1))[pairs].any(1)
+    overlap = np.max(overlaps[inside], initial=0.0)
+    overlap_anywhere = np.max(overlaps, initial=0.0)
+    mass = s.density * 4 / 3 * np.pi * radius**3
+    speed2 = (atoms[["vx", "vy", "vz"]].to_numpy() ** 2).sum(1)
+    health = {"atoms": len(atoms), "lost": expected_atoms - len(atoms),
+              "through_substrate": int(np.sum(np.nan_to_num(below, nan=0.0) < -BELOW_SUBSTRATE_RADII)),
+              "max_overlap_fraction": float(overlap), "max_overlap_anywhere": float(overlap_anywhere),
+              "kinetic_energy_J": float(0.5 * np.sum(mass * speed2)),
+              "max_speed_m_s": float(np.sqrt(speed2.max(initial=0.0)))}
+    problems = []
+    if health["lost"]:
+        problems.append(f"{health['lost']} particles lost (left the box)")
+    if health["through_substrate"]:
+        problems.append(f"{health['through_substrate']} particles fell through the substrate")
+    if overlap > MAX_OVERLAP:
+        problems.append(f"largest overlap in the sampling region {overlap:.1%} of a radius exceeds {MAX_OVERLAP:.0%}")
+    if overlap_anywhere > MAX_OVERLAP_ANYWHERE:
+        problems.append(f"largest overlap {overlap_anywhere:.1%} of a radius exceeds {MAX_OVERLAP_ANYWHERE:.0%}")
+    if not np.all(np.isfinite(xyz)):
+        problems.append("non-finite positions")
+    if problems:
+        raise LiggghtsError("unsound run: " + "; ".join(problems))
+    return health
+
+
+def squeeze_out_speed(density: float, youngs_modulus: float, poisson_ratio: float,
+                      overlap_fraction: float = MAX_OVERLAP_ANYWHERE) -> float:
+    """Speed [m/s] a sphere gets when the Hertz energy of an overlap of
+    ``overlap_fraction`` of its radius against a wall of its own material is
+    released into its translation.
+
+    ``W = 8/15 E* sqrt(r) d^(5/2)`` with ``d = f r`` and ``E* = E / (2 (1 - nu^2))``,
+    over ``m = 4/3 pi rho r^3``: ``v = sqrt(4 E* f^(5/2) / (5 pi rho))``, the same for
+    every radius. SI units.
+    """
+    effective_modulus = youngs_modulus / (2.0 * (1.0 - poisson_ratio**2))
+    return sqrt(4.0 * effective_modulus * overlap_fraction**2.5 / (5.0 * pi * density))
+
+
+def check_kinetic_energy(log: dict, wall_speed: float = 0.0, squeeze_speed: float = 0.0) -> dict:
+    """Refuse a run whose thermo output shows a non-finite kinetic energy or a
+    particle faster than the blow-up limit: the largest of BLOWUP_FLOOR_M_S,
+    BLOWUP_SPEED_FACTOR x ``wall_speed`` [m/s] (the fastest wall, the roller's
+    surface) and ``squeeze_speed`` [m/s] (``squeeze_out_speed``). Returns the
+    peak particle speed [m/s]."""
+    thermo = log["thermo"]
+    limit = max(BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR * wall_speed, squeeze_speed)
+    energy, vmax = thermo["KinEng"].to_numpy(), thermo["vmax"].to_numpy()
+    bad = ~np.isfinite(energy) | ~np.isfinite(vmax)
+    if bad.any():
+        raise LiggghtsError(f"unsound run: kinetic energy not finite at step {int(thermo['Step'][bad].iloc[0])}")
+    fast = vmax > limit
+    if fast.any():
+        first = np.argmax(fast)
+        raise LiggghtsError(f"unsound run: kinetic-energy blow-up, a particle at {vmax[first]:.3g} m/s at step "
+                            f"{int(thermo['Step'].iloc[first])} (limit {limit:.3g} m/s = max({BLOWUP_FLOOR_M_S:g}, "
+                            f"{BLOWUP_SPEED_FACTOR} x the fastest wall's {wall_speed:.3g} m/s, squeeze-out "
+                            f"{squeeze_speed:.3g} m/s)): lower the time step")
+    return {"peak_speed_m_s": float(vmax.max(initial=0.0))}
+
+
+def through_roller(atoms, axis_x: float, axis_z: float, radius: float) -> int:
+    """Particles whose centre is inside the roller (axis along y at ``axis_x``,
+    ``axis_z`` [m], ``radius`` [m]): they passed through its surface."""
+    distance = np.hypot(atoms["x"].to_numpy() - axis_x, atoms["z"].to_numpy() - axis_z)
+    return int(np.sum(distance < radius))
+
+
+def heap_supply(ahead: int, heap_particles: int) -> dict:
+    """Powder left ahead of the roller when it stops, ``run_out_mm`` past the
+    sampling region (``ahead`` particles of a heap of ``heap_particles``).
+
+    ``supply_margin`` is that share of the heap; none left (``heap_exhausted``)
+    means the heap ran out before the roller reached the end of the sampling
+    region (forward rolling lays several layers and eats a small heap): the
+    layer there is supply-limited, its M_s and Q_s lower bounds of the scene's
+    physics."""
+    return {"particles_ahead_of_roller": int(ahead), "supply_margin": ahead / heap_particles,
+            "heap_exhausted": ahead == 0}
+
+
+def _check_timestep(log: dict, s: Scene) -> None:
+    if log["max_rayleigh_fraction"] > s.max_rayleigh_fraction * (1 + 1e-6):
+        raise LiggghtsError(f"time step is {log['max_rayleigh_fraction']:.3f} of the Rayleigh time, above "
+                            f"timestep.max_rayleigh_fraction = {s.max_rayleigh_fraction}")

@@ -1,0 +1,136 @@
+"""What a LIGGGHTS input of one scene needs besides the config: seeds, the
+contact model, neighbour bins and skin, the MPI grid, and the plans of the
+spreading pass (checkpoints, feeds of the pile, travel segments). Plain
+functions of a :class:`~analysis.config.Scene`, in SI units; the templates in
+``templates/`` print what they return.
+"""
+from __future__ import annotations
+
+from math import ceil, sqrt
+
+import numpy as np
+
+from analysis.config import Scene
+from analysis.physics import liggghts_seeds
+
+THERMO_EVERY = 1000
+
+
+def seeds(config: dict, s: Scene, replicate: int = 0) -> list[int]:
+    """LIGGGHTS seeds of a replicate: one per size class, the distribution, the insertion."""
+    return liggghts_seeds(config["random_seed"] + 1000 * replicate, len(s.diameters) + 2)
+
+
+def contact_model(s: Scene) -> str:
+    """The granular contact model: Hertz with tangential history, plus rolling
+    friction and cohesion only where their coefficients are non-zero."""
+    model = "model hertz tangential history"
+    if s.rolling_friction > 0:
+        model += " rolling_friction epsd2"
+    if s.cohesion_energy_density > 0:
+        model += " cohesion sjkr"
+    return model
+
+
+SKIN_DIAMETERS = 0.2
+
+
+REST_CHUNK_S = 0.005  # [s] between two at-rest checks
+
+
+def rest_loop(s: Scene, max_time: float, stop_at_rest: bool = True) -> dict:
+    """Template values for ``_until_rest.j2``: chunks of REST_CHUNK_S up to ``max_time``,
+    stopping early (``stop_at_rest``) once the kinetic energy per particle [J] is
+    that of the RMS speed ``rest_rms_speed_mm_s``."""
+    chunk = THERMO_EVERY * max(1, round(REST_CHUNK_S / s.timestep / THERMO_EVERY))
+    return {"chunk_steps": chunk, "max_chunks": max(1, ceil(max_time / (chunk * s.timestep))),
+            "rest_speed": s.rest_speed, "rest_ke": 0.5 * s.mean_particle_mass * s.rest_speed**2,
+            "stop_at_rest": stop_at_rest}
+
+
+def binsize(s: Scene) -> float:
+    """Neighbour bin size [m]: the neighbour cutoff (largest diameter + skin).
+
+    Each rebuild tests every particle in the bins a mesh facet's box touches,
+    and the rotating roller forces a rebuild every ~10-20 steps: these bins
+    are 9 % faster than bins of 4 largest diameters, and LIGGGHTS' own (half
+    the cutoff) 28 % slower than those (benchmarks/measured/spread_profile.md)."""
+    return max(s.diameters) + skin(s)
+
+
+def skin(s: Scene) -> float:
+    """Neighbour-list skin [m]: 20 % of the mean class diameter. Each particle
+    checks every substrate triangle within its radius + skin, every step."""
+    return SKIN_DIAMETERS * float(np.mean(s.diameters))
+
+
+def processors_grid(s: Scene) -> str:
+    """LIGGGHTS ``processors`` grid for ``s.mpi_ranks`` ranks.
+
+    The powder is a thin bed under a box as tall as the roller, so z is never
+    split. LIGGGHTS 3.8 has no load balancing (no ``balance`` command), and
+    along the travel the particles crowd into the heap: a cut across x leaves
+    ranks idle. A narrow periodic strip is uniform across its width, so it is
+    cut across y into equal shares, each at least the ghost cutoff (largest
+    diameter + skin) wide; a wide scene (the paper level) lets LIGGGHTS
+    choose the grid in x and y.
+    """
+    slab = max(s.diameters) + skin(s)  # the ghost cutoff
+    if s.mpi_ranks <= 1:
+        return "1 1 1"
+    if s.strip_width / s.mpi_ranks >= slab and s.strip_width < 0.1 * (s.box[1] - s.box[0]):
+        return f"1 {s.mpi_ranks} 1"
+    return "* * 1"
+
+
+def checkpoint_plan(travel_steps: int, count: int, resume_step: int = 0) -> list[tuple[int, int | None]]:
+    """(step, previous checkpoint's step) of the checkpoints still to write after ``resume_step``:
+    ``count`` evenly spaced over the travel (none at its end)."""
+    if not count:
+        return []
+    every = ceil(travel_steps / (count + 1))
+    steps = [k * every for k in range(1, count + 1) if resume_step < k * every < travel_steps]
+    return list(zip(steps, [resume_step or None] + steps[:-1]))
+
+
+#: Travel [m] of the roller between two top-ups of a fed pile (``feed_pile_mg_per_mm``):
+#: the pile dips by at most the layer laid over it (about 2 % of a 20 mg/mm pile).
+FEED_EVERY = 0.5e-3
+
+
+def feed_plan(s: Scene, x0: float, speed: float, travel_steps: int, heap_toe: float) -> list[int]:
+    """Steps of the travel at which a fed pile is topped up: every :data:`FEED_EVERY`
+    of travel, from the step at which the feed zone (``s.feed_length`` ahead of the
+    roller axis, which starts at ``x0`` [m]) first covers the settled heap's toe
+    ``heap_toe`` [m], so the heap itself is counted before anything is added.
+    Empty without a feed."""
+    if s.feed_pile_mass is None:
+        return []
+    every = max(1, round(FEED_EVERY / (speed * s.timestep)))
+    first = max(0, ceil((heap_toe - s.feed_length - x0) / (speed * s.timestep)))
+    return list(range(first, travel_steps, every))
+
+
+def feed_zone(s: Scene, x_axis: float, floor: float) -> dict:
+    """The feed zone [m] when the roller axis is at ``x_axis``: a block from the axis
+    to ``s.feed_length`` ahead, from ``floor`` (above the substrate's highest point)
+    to the roller's height there, less a cylinder of the roller's radius plus the
+    largest particle's (nothing is inserted into the roller or the substrate)."""
+    r = s.roller_radius
+    top = s.roller_gap + r - sqrt(r**2 - s.feed_length**2)
+    return {"x0": x_axis, "x1": x_axis + s.feed_length, "z0": floor, "z1": top,
+            "axis_z": s.roller_gap + r, "radius": r + max(s.diameters) / 2}
+
+
+def travel_segments(travel_steps: int, checkpoints: list, feeds: list, resume_step: int = 0) -> list[dict]:
+    """The travel after ``resume_step`` cut at every checkpoint and feed step: a list of
+    ``{"end", "feed", "checkpoint"}`` in order; ``feed`` is true if the pile is topped up at
+    the segment's start, ``checkpoint`` the ``(step, previous)`` written at its end or None."""
+    at_end = {step: (step, previous) for step, previous in checkpoints}
+    feeds = [f for f in feeds if f >= resume_step]
+    cuts = sorted(set(at_end) | {f for f in feeds if f > resume_step} | {travel_steps})
+    segments, start = [], resume_step
+    for end in cuts:
+        segments.append({"start": start, "end": end, "feed": start in feeds, "checkpoint": at_end.get(end)})
+        start = end
+    return segments

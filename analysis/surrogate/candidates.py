@@ -1,0 +1,231 @@
+"""Candidate surrogates with a predictive standard deviation, as scikit-learn
+estimators: :class:`GPSurrogate` (a Gaussian process per metric),
+:class:`MLPEnsemble` (the paper's Table 2 network started from several seeds)
+and :class:`TreeEnsemble` (extremely randomised trees); :func:`make_candidate`
+builds one by name. :mod:`analysis.surrogate.selection` chooses among them.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from scipy.linalg import cho_solve, solve_triangular
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.ensemble import ExtraTreesRegressor
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.gaussian_process import GaussianProcessRegressor
+from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
+from sklearn.preprocessing import StandardScaler
+from threadpoolctl import threadpool_limits
+
+from analysis.surrogate.network import make_surrogate
+
+#: Candidate names and what they are (for tables and the report).
+CANDIDATES = {
+    "mlp": "paper's Table 2 network, ensemble over random seeds",
+    "gp": "Gaussian process, anisotropic RBF + white noise, one per metric",
+    "trees": "extremely randomised trees",
+}
+
+
+class GPSurrogate(RegressorMixin, BaseEstimator):
+    """One Gaussian process per metric over standardised (U, omega), anisotropic RBF + noise.
+
+    Kernel of each metric (on standardised inputs and targets):
+    ``ConstantKernel(1) * RBF([1, 1]) + WhiteKernel(0.1)``, hyperparameters by
+    maximum marginal likelihood (``n_restarts`` extra random starts).
+
+    Parameters
+    ----------
+    n_restarts : int
+        Restarts of the kernel optimiser.
+    random_state : int
+        Seed of those restarts.
+    length_scale_bounds : (float, float)
+        Bounds of the length scales, in standard deviations of the inputs.
+    noise_bounds : (float, float)
+        Bounds of the white-noise variance, in variances of the target.
+
+    Attributes
+    ----------
+    gps_ : list of GaussianProcessRegressor
+        The fitted processes, one per metric.
+    length_scales_ : numpy.ndarray, shape (4, 2)
+        Fitted length scales per metric in input units (mm/s, rad/s).
+    noise_std_ : numpy.ndarray, shape (4,)
+        Fitted run-to-run noise (white kernel) per metric, metric units.
+    convergence_warnings_ : int
+        Optimiser warnings (e.g. a length scale at its bound), not re-emitted.
+    """
+
+    provides_std = True
+
+    def __init__(self, n_restarts=2, random_state=0, length_scale_bounds=(0.05, 50.0),
+                 noise_bounds=(1e-6, 1.0)):
+        self.n_restarts = n_restarts
+        self.random_state = random_state
+        self.length_scale_bounds = length_scale_bounds
+        self.noise_bounds = noise_bounds
+
+    def _kernel(self, n_inputs):
+        return (ConstantKernel(1.0, (1e-3, 1e3))
+                * RBF(np.ones(n_inputs), tuple(self.length_scale_bounds))
+                + WhiteKernel(0.1, tuple(self.noise_bounds)))
+
+    def fit(self, X, Y):
+        """Fit on X (n, 2) [mm/s, rad/s] and Y (n, 4) [metric units]."""
+        X, Y = np.asarray(X, float), np.asarray(Y, float)
+        self.x_scaler_ = StandardScaler().fit(X)
+        self.y_mean_ = Y.mean(axis=0)
+        self.y_scale_ = np.where(Y.std(axis=0) > 0, Y.std(axis=0), 1.0)
+        Xs, Ys = self.x_scaler_.transform(X), (Y - self.y_mean_) / self.y_scale_
+        self.gps_ = []
+        self.convergence_warnings_ = 0
+        with warnings.catch_warnings(record=True) as caught, threadpool_limits(1, user_api="blas"):
+            warnings.simplefilter("always", ConvergenceWarning)
+            for j in range(Ys.shape[1]):          # one process per metric (4), not per point
+                gp = GaussianProcessRegressor(self._kernel(X.shape[1]), normalize_y=False,
+                                              n_restarts_optimizer=int(self.n_restarts),
+                                              random_state=int(self.random_state))
+                self.gps_.append(gp.fit(Xs, Ys[:, j]))
+        for w in caught:
+            if issubclass(w.category, ConvergenceWarning):
+                self.convergence_warnings_ += 1
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        self.X_train_ = Xs
+        self.length_scales_ = np.array([gp.kernel_.k1.k2.length_scale for gp in self.gps_]) \
+            * self.x_scaler_.scale_
+        self.noise_std_ = np.sqrt([gp.kernel_.k2.noise_level for gp in self.gps_]) * self.y_scale_
+        return self
+
+    def _latent_var(self, Xs_query, Xs_train=None):
+        """Posterior variance of each metric's mean (standardised units), shape (m, 4).
+
+        ``Xs_train`` (standardised) replaces the training inputs, with the
+        fitted hyperparameters kept: the variance does not depend on the
+        targets, so this is the variance after adding runs whose results are
+        not known yet (kriging believer).
+        """
+        Xs_train = self.X_train_ if Xs_train is None else Xs_train
+        out = np.empty((len(Xs_query), len(self.gps_)))
+        for j, gp in enumerate(self.gps_):
+            signal = gp.kernel_.k1
+            K = gp.kernel_(Xs_train)                       # white noise on the diagonal
+            L = np.linalg.cholesky(K + 1e-10 * np.eye(len(K)))
+            v = solve_triangular(L, signal(Xs_train, Xs_query), lower=True)
+            out[:, j] = np.clip(signal.diag(Xs_query) - np.sum(v * v, axis=0), 0.0, None)
+        return out
+
+    def predict(self, X, return_std=False):
+        """Metrics at X (n, 2); with ``return_std`` also the posterior std of the mean, (n, 4)."""
+        Xs = self.x_scaler_.transform(np.asarray(X, float))
+        mean = np.column_stack([gp.predict(Xs) for gp in self.gps_]) * self.y_scale_ + self.y_mean_
+        if not return_std:
+            return mean
+        return mean, np.sqrt(self._latent_var(Xs)) * self.y_scale_
+
+    def loo_residuals(self):
+        """Leave-one-run-out residuals y - y_loo of the training runs, (n, 4), metric units.
+
+        Closed form with the fitted hyperparameters kept:
+        ``r_i = [K^-1 y]_i / [K^-1]_ii``.
+        """
+        out = np.empty((len(self.X_train_), len(self.gps_)))
+        for j, gp in enumerate(self.gps_):
+            K_inv = cho_solve((gp.L_, True), np.eye(len(self.X_train_)))
+            out[:, j] = gp.alpha_ / np.diag(K_inv)
+        return out * self.y_scale_
+
+
+class MLPEnsemble(RegressorMixin, BaseEstimator):
+    """The paper's network fitted from ``n_members`` random seeds; mean and spread.
+
+    Member k is :func:`analysis.surrogate.network.make_surrogate` with ``random_state
+    = params["random_state"] + k * n_init`` (each keeps its own ``n_init``
+    restarts, so no two members share an initialisation).
+
+    Parameters
+    ----------
+    params : dict
+        The ``surrogate:`` section of config.yaml.
+    n_members : int
+        Networks in the ensemble (>= 2 for a standard deviation).
+    """
+
+    provides_std = True
+
+    def __init__(self, params=None, n_members=5):
+        self.params = params
+        self.n_members = n_members
+
+    def fit(self, X, Y):
+        """Fit every member on X (n, 2) [mm/s, rad/s] and Y (n, 4)."""
+        n_init = int(self.params["n_init"])
+        base = int(self.params["random_state"])
+        self.members_ = [make_surrogate({**self.params, "random_state": base + k * n_init}).fit(X, Y)
+                         for k in range(int(self.n_members))]
+        return self
+
+    def predict(self, X, return_std=False):
+        """Mean of the members (n, 4); with ``return_std`` also their standard deviation (ddof 1)."""
+        P = np.stack([m.predict(np.asarray(X, float)) for m in self.members_])
+        mean = P.mean(axis=0)
+        if not return_std:
+            return mean
+        return mean, P.std(axis=0, ddof=1) if len(P) > 1 else np.zeros_like(mean)
+
+
+class TreeEnsemble(RegressorMixin, BaseEstimator):
+    """Extremely randomised trees on standardised targets; mean and spread of the trees.
+
+    Parameters
+    ----------
+    n_trees : int
+    random_state : int
+    min_samples_leaf : int
+    """
+
+    provides_std = True
+
+    def __init__(self, n_trees=300, random_state=0, min_samples_leaf=1):
+        self.n_trees = n_trees
+        self.random_state = random_state
+        self.min_samples_leaf = min_samples_leaf
+
+    def fit(self, X, Y):
+        """Fit on X (n, 2) [mm/s, rad/s] and Y (n, 4)."""
+        Y = np.asarray(Y, float)
+        self.y_mean_ = Y.mean(axis=0)
+        self.y_scale_ = np.where(Y.std(axis=0) > 0, Y.std(axis=0), 1.0)
+        self.forest_ = ExtraTreesRegressor(int(self.n_trees), random_state=int(self.random_state),
+                                           min_samples_leaf=int(self.min_samples_leaf))
+        self.forest_.fit(np.asarray(X, float), (Y - self.y_mean_) / self.y_scale_)
+        return self
+
+    def predict(self, X, return_std=False):
+        """Forest mean (n, 4); with ``return_std`` also the trees' standard deviation."""
+        X = np.asarray(X, float)
+        if not return_std:
+            return self.forest_.predict(X) * self.y_scale_ + self.y_mean_
+        P = np.stack([t.predict(X) for t in self.forest_.estimators_]).reshape(
+            len(self.forest_.estimators_), len(X), -1)
+        return P.mean(axis=0) * self.y_scale_ + self.y_mean_, P.std(axis=0) * self.y_scale_
+
+
+def make_candidate(name, params):
+    """Build the unfitted candidate ``name`` (one of :data:`CANDIDATES`) from ``surrogate:`` params.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name (the message lists the known ones).
+    """
+    p = params
+    if name == "mlp":
+        return MLPEnsemble(dict(params), n_members=int(p["mlp_members"]))
+    if name == "gp":
+        return GPSurrogate(n_restarts=int(p["gp_restarts"]), random_state=int(p["random_state"]))
+    if name == "trees":
+        return TreeEnsemble(int(p["tree_count"]), random_state=int(p["random_state"]))
+    raise ValueError(f"unknown surrogate model {name!r}; choose from {', '.join(CANDIDATES)}")

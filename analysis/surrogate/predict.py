@@ -1,0 +1,153 @@
+"""Ask a fitted surrogate: predictions (with a standard deviation where the
+model gives one) on points or a (U, omega) grid, and the paper's hybrid
+indices (Figure 10): defect index Rq/max * Phi/max against throughput index
+Qs/max * Ms/max.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from analysis.metrics.dataset import METRICS
+
+
+def metric_maxima(frame):
+    """Maxima of the four metrics over ``frame`` (units of the columns)."""
+    return {m: float(frame[m].max()) for m in METRICS}
+
+
+def hybrid_indices(frame, maxima=None):
+    """The paper's hybrid properties of Figure 10.
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        Has the four metric columns.
+    maxima : dict, optional
+        Metric maxima to normalise by; default: the maxima over ``frame``.
+
+    Returns
+    -------
+    throughput_index, defect_index : numpy.ndarray (dimensionless)
+        ``Q_s/max(Q_s) * M_s/max(M_s)`` and ``R_q/max(R_q) * Phi/max(Phi)``.
+    """
+    maxima = metric_maxima(frame) if maxima is None else maxima
+    bad = [m for m in METRICS if not maxima[m] > 0]
+    if bad:
+        raise ValueError(f"cannot normalise by a non-positive maximum: {', '.join(bad)}")
+    norm = {m: frame[m].to_numpy(float) / maxima[m] for m in METRICS}
+    return (norm["throughput_mm2_s"] * norm["mass_g"],
+            norm["roughness_um"] * norm["porosity_pct"])
+
+
+def provides_std(model):
+    """True if ``model.predict(X, return_std=True)`` gives a predictive standard deviation.
+
+    The candidates of :mod:`analysis.surrogate.selection` do (GP posterior, spread of
+    an MLP ensemble or of a tree ensemble); the plain network of
+    :func:`make_surrogate` does not.
+    """
+    return bool(getattr(model, "provides_std", False))
+
+
+def predict_with_std(model, U, omega):
+    """Predicted metrics and their predictive standard deviation at the speeds.
+
+    Parameters
+    ----------
+    model : estimator
+        A fitted surrogate with :func:`provides_std`.
+    U, omega : array_like, 1-D, same length
+        Spreader translation speed (mm/s) and roller angular speed (rad/s).
+
+    Returns
+    -------
+    mean, std : numpy.ndarray, shape (n, 4)
+        Columns in :data:`METRICS` order, in the metrics' units.  ``std`` is
+        the uncertainty of the predicted *mean* metric (not the seed-to-seed
+        scatter of a single run, see :mod:`analysis.metrics.noise_floor`).
+
+    Raises
+    ------
+    ValueError
+        If the model gives no predictive standard deviation.
+    """
+    if not provides_std(model):
+        raise ValueError(f"{type(model).__name__} gives no predictive standard deviation; "
+                         "refit with a model of analysis.surrogate.selection (gp, mlp ensemble, trees)")
+    X = np.c_[np.asarray(U, float), np.asarray(omega, float)]
+    mean, std = model.predict(X, return_std=True)
+    return np.asarray(mean, float), np.asarray(std, float)
+
+
+def predict_frame(model, U, omega):
+    """Predict the metrics at the speeds ``U`` [mm/s] and ``omega`` [rad/s] (1-D, same length).
+
+    Returns a frame of the speeds and the four metrics; when the model gives a
+    predictive standard deviation (:func:`provides_std`), also
+    ``<metric>_std`` columns in the metric's unit.
+    """
+    U, omega = np.asarray(U, float), np.asarray(omega, float)
+    frame = pd.DataFrame({"U_mm_s": U, "omega_rad_s": omega})
+    if provides_std(model):
+        pred, std = predict_with_std(model, U, omega)
+    else:
+        pred, std = model.predict(np.c_[U, omega]), None
+    for j, m in enumerate(METRICS):
+        frame[m] = pred[:, j]
+    if std is not None:
+        for j, m in enumerate(METRICS):
+            frame[f"{m}_std"] = std[:, j]
+    return frame
+
+
+def hybrid_index_std(frame, maxima):
+    """First-order standard deviation of the hybrid indices from the metrics' ``_std`` columns.
+
+    Treats the errors of the metrics as independent:
+    ``std(Q M) = sqrt((std_Q M)^2 + (Q std_M)^2)``, divided by the maxima
+    (held fixed).  Returns (throughput_index_std, defect_index_std),
+    dimensionless.
+    """
+    def product_std(a, b):
+        va, vb = frame[a].to_numpy(float), frame[b].to_numpy(float)
+        sa, sb = frame[f"{a}_std"].to_numpy(float), frame[f"{b}_std"].to_numpy(float)
+        return np.hypot(sa * vb, va * sb) / (maxima[a] * maxima[b])
+    return (product_std("throughput_mm2_s", "mass_g"), product_std("roughness_um", "porosity_pct"))
+
+
+def predict_grid(model, U_range, omega_range, n):
+    """Evaluate the surrogate on a regular n x n grid of spreader speeds.
+
+    Parameters
+    ----------
+    model : estimator
+        A fitted surrogate.
+    U_range : (float, float)
+        Translation speed limits, mm/s.
+    omega_range : (float, float)
+        Roller angular speed limits, rad/s.
+    n : int
+        Grid points per axis (>= 2).
+
+    Returns
+    -------
+    pandas.DataFrame
+        n*n rows (U outer, omega inner): ``U_mm_s``, ``omega_rad_s``, the four
+        metrics in their units, and the dimensionless ``throughput_index`` and
+        ``defect_index`` (:func:`hybrid_indices`, maxima over this grid).  When
+        the model gives a predictive standard deviation, also
+        ``<metric>_std`` (metric units) and ``throughput_index_std``,
+        ``defect_index_std`` (:func:`hybrid_index_std`).
+    """
+    if int(n) < 2:
+        raise ValueError(f"grid needs at least 2 points per axis, got {n}")
+    U, omega = np.meshgrid(np.linspace(*U_range, int(n)), np.linspace(*omega_range, int(n)),
+                           indexing="ij")
+    grid = predict_frame(model, U.ravel(), omega.ravel())
+    maxima = metric_maxima(grid)
+    grid["throughput_index"], grid["defect_index"] = hybrid_indices(grid, maxima)
+    if provides_std(model):
+        grid["throughput_index_std"], grid["defect_index_std"] = hybrid_index_std(grid, maxima)
+    return grid

@@ -1,0 +1,79 @@
+"""Regression scores of a surrogate against simulated runs: Pearson R (the
+paper's accuracy, target >= 0.96), R^2, RMSE and MAPE per metric, and their
+one-line text.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sklearn.metrics import r2_score
+
+from analysis.metrics.dataset import METRICS
+
+#: The paper's accuracy claim: R >= 0.96 for every metric (section 3).
+R_TARGET = 0.96
+
+
+_MAPE_NOTE = ("MAPE_pct = mean(|simulated - predicted| / |simulated|) x 100 over the runs "
+              "whose simulated value is nonzero (n_nonzero of them); null when none is.")
+
+
+def pearson_r(y_true, y_pred):
+    """Column-wise Pearson correlation coefficient; NaN where a column is constant."""
+    a = y_true - y_true.mean(axis=0)
+    b = y_pred - y_pred.mean(axis=0)
+    den = np.sqrt((a * a).sum(axis=0) * (b * b).sum(axis=0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, (a * b).sum(axis=0) / den, np.nan)
+
+
+def regression_scores(y_true, y_pred):
+    """R, R^2 and MAPE per metric.
+
+    Parameters
+    ----------
+    y_true, y_pred : numpy.ndarray, shape (n, 4)
+        Simulated and predicted metrics, columns in :data:`METRICS` order.
+
+    Returns
+    -------
+    dict
+        ``{metric: {"R", "R2", "MAPE_pct", "n_nonzero"}}``; R is the paper's
+        measure (Pearson of simulated vs predicted); MAPE (%) is taken over
+        the nonzero simulated values only.  Undefined values are None.
+    """
+    r = pearson_r(y_true, y_pred)
+    r2 = r2_score(y_true, y_pred, multioutput="raw_values")
+    nonzero = y_true != 0
+    rel = np.abs(y_pred - y_true) / np.where(nonzero, np.abs(y_true), 1.0)
+    n_nonzero = nonzero.sum(axis=0)
+    with np.errstate(invalid="ignore"):
+        mape = 100.0 * np.where(nonzero, rel, 0.0).sum(axis=0) / n_nonzero
+    return {m: {"R": _num(r[j]), "R2": _num(r2[j]), "MAPE_pct": _num(mape[j]),
+                "n_nonzero": int(n_nonzero[j])}
+            for j, m in enumerate(METRICS)}
+
+
+def _num(x):
+    """A JSON-safe float: None for NaN or infinity."""
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def _score_text(x):
+    return "  n/a" if x is None else f"{x:5.3f}"
+
+
+def format_scores(scores):
+    """A few lines for a log: fit status and R / R^2 per metric on train, test and CV."""
+    fit = scores["fit"]
+    lines = [f"{fit['solver']}: {fit['n_iter']} iterations, "
+             f"{'converged' if fit['converged'] else 'NOT converged'}, {fit['fit_time_s']:.2f} s; "
+             f"{scores['split']['n_train']} training / {scores['split']['n_test']} test runs "
+             f"(split seed {scores['split']['seed']})"]
+    for m, (symbol, unit) in METRICS.items():
+        lines.append(f"{symbol:>4} ({unit}): " + "  ".join(
+            f"{part} R {_score_text(scores[part][m]['R'])} "
+            f"R2 {_score_text(scores[part][m]['R2'])}"
+            for part in ("train", "test", "cv")))
+    return "\n".join(lines + scores["warnings"])

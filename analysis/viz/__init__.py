@@ -1,0 +1,2 @@
+"""Pictures: process maps and regressed surfaces, and 3-D views of a run.
+"""
