@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import math
 from dataclasses import dataclass
 from math import sqrt
 from pathlib import Path
@@ -67,9 +68,26 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
         base_dir = path.parent if base_dir is None else base_dir
     else:
         config = copy.deepcopy(source)
+    check_finite(config)
     validate_schema(config)
     check_config(config, Path(base_dir or "."))
     return config
+
+
+def check_finite(config, key: str = "") -> None:
+    """Raise :class:`ConfigError` naming the first NaN or infinite number in ``config``.
+
+    JSON Schema cannot say "finite": NaN fails no ``minimum`` and infinity passes
+    every ``minimum``, so this walks the mapping before the schema does.
+    """
+    if isinstance(config, dict):
+        for k, v in config.items():
+            check_finite(v, f"{key}.{k}" if key else str(k))
+    elif isinstance(config, list):
+        for i, v in enumerate(config):
+            check_finite(v, f"{key}[{i}]")
+    elif isinstance(config, float) and not math.isfinite(config):
+        _fail(key or "<top level>", config, "must be a finite number")
 
 
 def validate_schema(config: dict) -> None:

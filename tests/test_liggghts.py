@@ -16,7 +16,7 @@ from analysis.config import scene
 from analysis.dem.drop import drop_sphere, first_bounce, free_fall_time
 from analysis.dem.health import substrate_height
 from analysis.dem.inputs import checkpoint_plan, feed_plan, processors_grid, travel_segments
-from analysis.dem.liggghts import LiggghtsError, check_seeds, read_log, run
+from analysis.dem.liggghts import LiggghtsError, check_seeds, input_path, read_log, run
 from analysis.dem.simulate import make_geometry, settle, spread
 from analysis.metrics.dump import read_dump
 from tests.test_config import ROOT  # noqa: E402
@@ -28,8 +28,9 @@ U_MM_S, OMEGA = 100.0, -5.0
 
 @pytest.fixture(scope="module")
 def smoke(config, tmp_path_factory):
-    """Geometry, a settled heap and one spreading pass at U = 100 mm/s, omega = -5 rad/s."""
-    root = tmp_path_factory.mktemp("smoke")
+    """Geometry, a settled heap and one spreading pass at U = 100 mm/s, omega = -5 rad/s, in a
+    folder whose path holds a space and a non-ASCII letter (LIGGGHTS splits input lines at spaces)."""
+    root = tmp_path_factory.mktemp("smoke") / "My Projects" / "spreadmäp"
     make_geometry(config, "smoke", root / "meshes")
     settled = settle(config, "smoke", root / "meshes", root / "settle")
     result = spread(config, "smoke", U_MM_S, OMEGA, root / "meshes", root / "settle", root / "run")
@@ -40,6 +41,21 @@ def roller_state(path):
     import pyvista as pv
     mesh = pv.read(path)
     return mesh.cell_centers().points, mesh.cell_data["v"]
+
+
+def test_inputs_name_files_relative_to_the_run_folder(smoke):
+    """No input holds the project's absolute path, so any folder works (the fixture's has a space)."""
+    assert " " in str(smoke["root"])
+    for name in ("settle/settle.in", "run/spread.in"):
+        text = (smoke["root"] / name).read_text()
+        assert str(smoke["root"]) not in text and "../meshes/substrate.stl" in text, name
+
+
+def test_a_path_liggghts_cannot_read_is_refused_by_name(tmp_path):
+    (tmp_path / "a b").mkdir()
+    assert input_path(tmp_path / "a b" / "x.stl", tmp_path / "a b") == "x.stl"
+    with pytest.raises(LiggghtsError, match="a b/x.stl"):
+        input_path(tmp_path / "a b" / "x.stl", tmp_path)
 
 
 def test_heap_settles_whole(smoke):

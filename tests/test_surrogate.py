@@ -97,6 +97,16 @@ def test_regression_scores_mape_skips_zero_truth():
     assert constant["mass_g"]["R"] is None                    # undefined, not NaN
 
 
+def test_a_single_test_run_has_mape_but_no_r(dataset, fit_params):
+    """n_test 1: R and R^2 are undefined on one run and say so (None), not a crash."""
+    _, scores = fit_surrogate(dataset, {**fit_params, "n_test": 1, "n_init": 1})
+    assert scores["split"]["n_test"] == 1
+    for values in scores["test"].values():
+        assert values["R"] is None and values["R2"] is None
+        assert values["MAPE_pct"] < 10.0
+    json.dumps(scores, allow_nan=False)
+
+
 def test_fit_rejects_missing_values(dataset, fit_params):
     broken = dataset.copy()
     broken.loc[7, "porosity_pct"] = np.nan

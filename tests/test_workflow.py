@@ -35,7 +35,9 @@ def snakemake_cmd(workdir, U, *extra):
 
 @pytest.fixture(scope="module")
 def workflow(tmp_path_factory):
-    workdir = tmp_path_factory.mktemp("workflow")
+    """The smoke workflow in a folder whose path holds a space and a non-ASCII letter."""
+    workdir = tmp_path_factory.mktemp("workflow") / "My Projects" / "spreadmäp"
+    workdir.mkdir(parents=True)
     proc = subprocess.run(snakemake_cmd(workdir, FIRST_U), capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return workdir

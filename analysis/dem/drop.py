@@ -32,7 +32,7 @@ def drop_sphere(s: Scene, outdir: str | Path, diameter: float, height: float, du
     flat_scene = replace(s, rolling_friction=0.0)  # no rolling in a normal impact
     box = [-width, width, 0.0, width, -diameter, height + 2 * diameter]
     text = render("drop.in.j2", s=flat_scene, contact=contact_model(flat_scene), box=box, skin=skin(s),
-                  thermo_every=1000, substrate_stl=(out / "flat.stl").resolve(), diameter=diameter,
+                  thermo_every=1000, substrate_stl="flat.stl", diameter=diameter,
                   position=[0.0, width / 2, height + diameter / 2], steps=ceil(duration / s.timestep),
                   print_every=print_every, trace="trace.txt")
     (out / "drop.in").write_text(text)

@@ -53,6 +53,19 @@ def render(template: str, **context) -> str:
     return env.get_template(template).render(**context)
 
 
+def input_path(path: str | Path, run_dir: str | Path) -> str:
+    """``path`` as an input in ``run_dir`` (LIGGGHTS' working directory) names it: relative.
+
+    LIGGGHTS splits an input line at whitespace, so an absolute path under a
+    project folder such as ``~/My Projects`` would break; the path from the
+    run folder to a file of the same workflow holds only its own folder names.
+    """
+    rel = os.path.relpath(Path(path).resolve(), Path(run_dir).resolve())
+    if any(c.isspace() for c in rel):
+        raise LiggghtsError(f"LIGGGHTS cannot read {rel!r} from {str(run_dir)!r}: the path holds whitespace")
+    return rel
+
+
 def check_seeds(text: str) -> list[int]:
     """Every random seed in an input must be a distinct prime > 10000.
 

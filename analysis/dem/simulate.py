@@ -47,7 +47,7 @@ from analysis.dem.inputs import (
     skin,
     travel_segments,
 )
-from analysis.dem.liggghts import LiggghtsError, render, run
+from analysis.dem.liggghts import LiggghtsError, input_path, render, run
 from analysis.io import write_json
 from analysis.metrics.dump import read_dump
 from analysis.physics import liggghts_seeds, roller_motion
@@ -145,7 +145,8 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
                   skin=skin(s), binsize=binsize(s), thermo_every=THERMO_EVERY,
                   **(rest_loop(s, s.settle_time) if max_steps is None else
                      {**rest_loop(s, s.settle_time), "chunk_steps": max_steps, "max_chunks": 1}),
-                  substrate_stl=meshes / "substrate.stl", restart="settled.restart.part", dump="settled.dump.part",
+                  substrate_stl=input_path(meshes / "substrate.stl", out),
+                  restart="settled.restart.part", dump="settled.dump.part",
                   stray_x=s.sampling_region[0] - max(s.diameters), max_strays=MAX_STRAYS)
     (out / "settle.in").write_text(text)
     log = run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks)
@@ -256,9 +257,11 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
         feed = {"mass": s.feed_pile_mass, "floor": floor, "template_seeds": feed_seeds[:len(s.diameters) + 1],
                 "seeds": dict(zip(feeds, feed_seeds[len(s.diameters) + 1:]))}
     context = dict(s=s, contact=contact_model(s), box=[f"{v:.6g}" for v in s.box], U_mm_s=U_mm_s,
-                   omega_rad_s=omega_rad_s, motion=motion, restart=settled / "settled.restart", skin=skin(s),
+                   omega_rad_s=omega_rad_s, motion=motion, restart=input_path(settled / "settled.restart", out),
+                   skin=skin(s),
                    binsize=binsize(s), thermo_every=THERMO_EVERY, processors=processors_grid(s),
-                   substrate_stl=meshes / "substrate.stl", roller_stl=meshes / "roller_shell.stl",
+                   substrate_stl=input_path(meshes / "substrate.stl", out),
+                   roller_stl=input_path(meshes / "roller_shell.stl", out),
                    roller_z=s.roller_gap + s.roller_radius, travel_steps=travel_steps,
                    **rest_loop(s, s.rest_time, stop_at_rest="stop_at_rest" in skips),
                    travel_end=s.travel_end, remove_ahead="remove_ahead" in skips,
@@ -274,7 +277,8 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
             if seg["feed"]:
                 seg["zone"] = feed_zone(s, x0 + speed * seg["start"] * s.timestep, feed["floor"])
                 seg["seed"] = feed["seeds"][seg["start"]]
-        return render("spread.in.j2", resume=restart, resume_step=step, sfx="_resumed" if step else "",
+        return render("spread.in.j2", resume=restart and input_path(restart, out), resume_step=step,
+                      sfx="_resumed" if step else "",
                       roller_x=x0 + speed * elapsed, roller_angle_deg=np.degrees(abs(omega_rad_s) * elapsed) % 360,
                       segments=segments, feed=feed, **context)
 

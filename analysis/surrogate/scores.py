@@ -40,10 +40,15 @@ def regression_scores(y_true, y_pred):
     dict
         ``{metric: {"R", "R2", "MAPE_pct", "n_nonzero"}}``; R is the paper's
         measure (Pearson of simulated vs predicted); MAPE (%) is taken over
-        the nonzero simulated values only.  Undefined values are None.
+        the nonzero simulated values only.  Undefined values are None: R and
+        R^2 need at least two runs (a single test run has MAPE only).
     """
+    y_true, y_pred = np.atleast_2d(y_true), np.atleast_2d(y_pred)
     r = pearson_r(y_true, y_pred)
-    r2 = r2_score(y_true, y_pred, multioutput="raw_values")
+    if len(y_true) < 2:  # r2_score warns and returns one scalar NaN for a single sample
+        r2 = np.full(y_true.shape[1], np.nan)
+    else:
+        r2 = r2_score(y_true, y_pred, multioutput="raw_values")
     nonzero = y_true != 0
     rel = np.abs(y_pred - y_true) / np.where(nonzero, np.abs(y_true), 1.0)
     n_nonzero = nonzero.sum(axis=0)
