@@ -26,8 +26,29 @@ def atomic_path(path):
     try:
         yield tmp
         os.replace(tmp, path)
+    except OSError as err:  # name the target, not the temporary file (or no file: a failed write())
+        if err.errno is None:
+            raise
+        raise OSError(err.errno, err.strerror, str(path)) from None
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def error_line(err: BaseException) -> str:
+    """One line for a user: the file and the cause of an OS error, else the error's message.
+
+    ``OSError(28, 'No space left on device', 'results/x.json')`` becomes
+    ``results/x.json: No space left on device``.
+    """
+    if isinstance(err, OSError) and err.strerror:
+        files = [str(f) for f in (err.filename, err.filename2) if f is not None]
+        return ": ".join([*files, err.strerror]) if files else f"{err.strerror} (errno {err.errno})"
+    return str(err)
+
+
+#: The failures a user can cause (a bad value or file, a full disk, a failed engine run):
+#: the command-line tools and rules report them in one line, not a traceback.
+USER_ERRORS = (ValueError, OSError, RuntimeError)
 
 
 def write_text(text: str, path) -> Path:

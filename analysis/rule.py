@@ -3,15 +3,15 @@
 ``with rule_context(snakemake) as config:`` sends the job's output to its log,
 hands over the configuration (checked once, when the workflow started:
 ``rules/common.smk``), and turns a known failure
-(a ValueError such as ConfigError or DumpError, or a LiggghtsError) into a
-one-line message and a non-zero exit instead of a traceback.
+(a ValueError such as ConfigError or DumpError, a LiggghtsError, or an OS error
+such as a full disk) into a one-line message and a non-zero exit instead of a traceback.
 """
 from __future__ import annotations
 
 import contextlib
 import sys
 
-from analysis.dem.liggghts import LiggghtsError
+from analysis.io import USER_ERRORS, error_line
 
 
 @contextlib.contextmanager
@@ -20,7 +20,7 @@ def rule_context(smk):
     with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
         try:
             yield smk.config
-        except (ValueError, LiggghtsError) as err:  # ConfigError, DumpError, UnsoundRunError are ValueErrors
-            print(f"error: {err}", file=log, flush=True)
-            print(f"error in rule {smk.rule}: {err}", file=sys.__stderr__, flush=True)
+        except USER_ERRORS as err:  # ConfigError, DumpError, UnsoundRunError, LiggghtsError, a full disk
+            print(f"error: {error_line(err)}", file=log, flush=True)
+            print(f"error in rule {smk.rule}: {error_line(err)}", file=sys.__stderr__, flush=True)
             sys.exit(1)

@@ -181,3 +181,24 @@ def test_a_surface_without_triangles_is_refused_by_key(config, tmp_path):
     mine["substrate"]["mesh"] = str(tmp_path / "points.vtk")
     with pytest.raises(ConfigError, match="substrate.mesh.*no triangles"):
         make_geometry(load_config(mine), "smoke", tmp_path / "out")
+
+
+@pytest.mark.parametrize("case", ["out_is_a_file", "nan_in_config"])
+def test_simulate_cli_reports_one_line_and_writes_nothing(tmp_path, case):
+    """``spreadmap-simulate`` names the file and the OS's cause, or the bad key, in one line."""
+    import subprocess
+    import sys
+    config = tmp_path / "config.yaml"
+    text = (ROOT / "config.yaml").read_text()
+    if case == "nan_in_config":
+        text = text.replace("restitution: 0.6", "restitution: .nan")
+    config.write_text(text)
+    out = tmp_path / "meshes"
+    if case == "out_is_a_file":
+        out.write_text("not a folder")
+    res = subprocess.run([sys.executable, "-m", "analysis.dem.simulate", "geometry", "--config", str(config),
+                          "--level", "smoke", "--out", str(out)], capture_output=True, text=True, timeout=120)
+    assert res.returncode != 0 and res.stdout == ""
+    assert res.stderr.count("\n") == 1 and res.stderr.startswith("spreadmap-simulate: error: "), res.stderr
+    assert (f"{out}: File exists" if case == "out_is_a_file" else "'material.restitution' = nan") in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["config.yaml", "meshes"][: 1 + (case == "out_is_a_file")]

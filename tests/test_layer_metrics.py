@@ -17,6 +17,8 @@ import gzip
 import json
 import math
 import re
+import resource
+import signal
 import subprocess
 import sys
 from math import comb, pi
@@ -28,6 +30,7 @@ import pytest
 import trimesh
 
 import analysis.metrics.profilometer as lm
+from analysis.io import error_line
 from analysis.metrics.dump import read_dump, write_dump
 from analysis.metrics.profilometer import (
     layer_porosity,
@@ -488,6 +491,38 @@ def test_cli_bad_inputs_exit_2_and_write_nothing(tmp_path, lattice_dump, change,
     assert re.search(message, res.stderr), res.stderr
     assert res.stdout == ""
     assert list(tmp_path.glob("*.json")) == [] and list(tmp_path.glob(".out.json*")) == []
+
+
+def _file_size_limit(limit_bytes):
+    """A child process whose files cannot grow past ``limit_bytes`` (a full disk, as the OS reports it)."""
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # write() then fails with EFBIG instead of killing
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+    return limit
+
+
+@pytest.mark.parametrize("fault, cause", [("full", "File too large"), ("directory", "Is a directory")])
+def test_cli_os_error_is_one_line_naming_the_file_and_keeps_the_old_output(tmp_path, lattice_dump, fault, cause):
+    out = tmp_path / "m.json"
+    if fault == "directory":
+        out.mkdir()
+    else:
+        out.write_text("old")
+    res = subprocess.run([sys.executable, "-m", "analysis.metrics.profilometer", str(lattice_dump), "--region",
+                          "0", "0.5", "0", "0.5", "--speed", "50", "--density", str(RHO), "--lines", "50",
+                          "--json", str(out)], cwd=REPO, capture_output=True, text=True, timeout=60,
+                         preexec_fn=_file_size_limit(200) if fault == "full" else None)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr == f"layer_metrics: error: {out}: {cause}\n"
+    assert fault == "directory" or out.read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lattice.dump.gz", "m.json"]  # no temporary file
+
+
+def test_error_line_names_the_file_and_the_cause():
+    assert error_line(OSError(28, "No space left on device", "results/x.json")) == \
+        "results/x.json: No space left on device"
+    assert error_line(FileNotFoundError(2, "No such file or directory")) == "No such file or directory (errno 2)"
+    assert error_line(ValueError("speed -20 mm/s must be positive")) == "speed -20 mm/s must be positive"
 
 
 def read_bytes_cut(gz_path):

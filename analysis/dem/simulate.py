@@ -48,7 +48,7 @@ from analysis.dem.inputs import (
     travel_segments,
 )
 from analysis.dem.liggghts import LiggghtsError, input_path, render, run
-from analysis.io import write_json
+from analysis.io import USER_ERRORS, error_line, write_json
 from analysis.metrics.dump import read_dump
 from analysis.physics import liggghts_seeds, roller_motion
 
@@ -353,8 +353,8 @@ def main(argv=None) -> int:
                 parser.error("spread needs --U and --omega")
             result = spread(config, level, args.U, args.omega, args.meshes, args.settled, args.out,
                             replicate=args.replicate)
-    except (ConfigError, LiggghtsError) as err:
-        print(f"error: {err}", file=sys.stderr)
+    except USER_ERRORS as err:
+        print(f"spreadmap-simulate: error: {error_line(err)}", file=sys.stderr)
         return 2 if isinstance(err, ConfigError) else 1
     print(json.dumps(result, indent=2, default=str))
     return 0

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.io import write_text
+from analysis.io import USER_ERRORS, error_line, write_text
 from analysis.metrics.dump import read_dump
 
 __all__ = [
@@ -406,13 +406,13 @@ def main(argv=None):
         metrics = spread_layer_metrics(
             frame, region, args.speed * 1e-3, args.density, substrate=substrate, n_lines=args.lines, seed=args.seed
         )
-    except (ValueError, OSError) as err:
-        print(f"layer_metrics: error: {err}", file=sys.stderr)
+        text = json.dumps(to_report_units(metrics), indent=2)
+        if args.json:
+            write_text(text + "\n", args.json)
+    except USER_ERRORS as err:
+        print(f"layer_metrics: error: {error_line(err)}", file=sys.stderr)
         return 2
-    text = json.dumps(to_report_units(metrics), indent=2)
     print(text)
-    if args.json:
-        write_text(text + "\n", args.json)
     return 0
 
 

@@ -57,8 +57,8 @@ import yaml
 from scipy.linalg import solve_triangular
 from scipy.stats import qmc
 
-from analysis.config import PROJECT_DIR, ConfigError, load_config, run_name
-from analysis.io import atomic_path
+from analysis.config import PROJECT_DIR, load_config, run_name
+from analysis.io import USER_ERRORS, atomic_path, error_line
 from analysis.metrics.dataset import INPUTS, METRICS
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, targets_of
@@ -520,8 +520,8 @@ def main(argv=None):
         check_settings(settings, replicates)
         if args.cores < 1:
             raise ValueError(f"--cores must be at least 1, got {args.cores}")
-    except (ValueError, ConfigError) as err:
-        parser.exit(2, f"{parser.prog}: error: {err}\n")
+    except USER_ERRORS as err:  # ConfigError is a ValueError
+        parser.exit(2, f"{parser.prog}: error: {error_line(err)}\n")
     bounds = sweep_bounds(config)
     outdir = args.workdir / f"results/{level}/adaptive/{args.name}"
     print(f"adaptive design at level {level}: U {bounds[0][0]:g}..{bounds[0][1]:g} mm/s, omega "
@@ -533,10 +533,10 @@ def main(argv=None):
     try:
         result = run_adaptive(evaluator, bounds, settings, replicates=replicates,
                               log=lambda line: print(line, flush=True))
-    except (ValueError, RuntimeError) as err:
-        print(f"error: {err}", file=sys.stderr)
+        write_result(result, outdir, level)
+    except USER_ERRORS as err:
+        print(f"{parser.prog}: error: {error_line(err)}", file=sys.stderr)
         return 1
-    write_result(result, outdir, level)
     print(f"wrote {outdir}/design.csv, rounds.csv, dataset.csv, model.joblib")
     return 0
 

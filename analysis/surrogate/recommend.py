@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.io import USER_ERRORS, error_line
 from analysis.metrics.dataset import METRICS
 from analysis.surrogate.persistence import load_surrogate
 from analysis.surrogate.predict import predict_grid, provides_std
@@ -168,8 +169,8 @@ def main(argv=None):
             raise ValueError(f"cannot load model {args.model}: {err}") from err
         found = recommend(model, meta, args.max_porosity, args.max_roughness, args.grid_points,
                           args.margin)
-    except ValueError as err:
-        parser.error(str(err))
+    except USER_ERRORS as err:
+        parser.error(error_line(err))
     limits = f"porosity <= {args.max_porosity:g} %" + (
         "" if args.max_roughness is None else f" and roughness <= {args.max_roughness:g} um")
     if found is None:
