@@ -230,10 +230,14 @@ def _parse_atoms(body: bytes, names, n_atoms: int, path: Path, timestep: int) ->
             warnings.simplefilter("error", pd.errors.ParserWarning)  # more fields than names
             atoms = pd.read_csv(io.BytesIO(body), sep=r"\s+", header=None, names=names, index_col=False)
     except (pd.errors.ParserError, pd.errors.ParserWarning, ValueError) as err:
-        raise DumpError(f"{where}: atom lines do not match the columns {names} ({err})") from err
+        cause = " ".join(str(err).split())  # pandas' messages span lines
+        raise DumpError(f"{where}: atom lines do not match the columns {names} ({cause})") from err
     bad = [c for c in names if not pd.api.types.is_numeric_dtype(atoms[c]) or atoms[c].isna().any()]
     if len(atoms) != n_atoms or bad:
         raise DumpError(f"{where}: missing or non-numeric values in column(s) {bad} (truncated line?)")
+    infinite = [c for c in names if not np.isfinite(atoms[c].to_numpy(dtype=float)).all()]
+    if infinite:
+        raise DumpError(f"{where}: infinite values in column(s) {infinite}")
     return atoms
 
 

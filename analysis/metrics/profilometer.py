@@ -307,7 +307,8 @@ def spread_layer_metrics(atoms_or_frame, region, speed, density, substrate=None,
     ValueError
         On an empty or inverted region, a region outside the frame's box, a
         negative or non-finite speed, a non-positive density, fewer than one
-        line, missing columns or a substrate mesh not covering the region.
+        line, missing columns, a radius that is not positive or exceeds the box,
+        or a substrate mesh not covering the region.
     """
     atoms = getattr(atoms_or_frame, "atoms", atoms_or_frame)
     region = _check_inputs(region, speed, density, n_lines, getattr(atoms_or_frame, "box", None))
@@ -318,6 +319,17 @@ def spread_layer_metrics(atoms_or_frame, region, speed, density, substrate=None,
     radii = atoms["radius"].to_numpy(dtype=float)
 
     box = getattr(atoms_or_frame, "box", None) if box is None else box
+    extent = np.inf if box is None else float(np.ptp(np.asarray(box, dtype=float), axis=1).max())
+    wrong = ~((radii > 0) & (radii <= extent))
+    if wrong.any():
+        raise ValueError(f"{wrong.sum()} particle radii are not positive or exceed the box "
+                         f"(e.g. {float(radii[wrong][0])!r} m against a box of {extent:.4g} m)")
+    if box is not None:  # LIGGGHTS keeps atoms in the box (periodic ones within a skin of it)
+        lo, hi = np.asarray(box, dtype=float).T
+        away = ((centres < lo - extent) | (centres > hi + extent)).any(axis=1)
+        if away.any():
+            raise ValueError(f"{away.sum()} particles lie far outside the box (e.g. at "
+                             f"{centres[away][0].tolist()} m; box {np.asarray(box).tolist()} m)")
     periodic = getattr(atoms_or_frame, "periodic", (False, False, False)) if periodic is None else periodic
     if any(periodic) and box is None:
         raise ValueError(f"periodic axes {tuple(periodic)} need the box bounds (box=...)")
@@ -403,9 +415,11 @@ def main(argv=None):
         _check_inputs(args.region, args.speed, args.density, args.lines, frame.box * 1e3, unit="mm")
         region = tuple(v * 1e-3 for v in args.region)
         substrate = args.substrate if args.substrate is not None else args.substrate_height * 1e-3
-        metrics = spread_layer_metrics(
-            frame, region, args.speed * 1e-3, args.density, substrate=substrate, n_lines=args.lines, seed=args.seed
-        )
+        try:
+            metrics = spread_layer_metrics(frame, region, args.speed * 1e-3, args.density, substrate=substrate,
+                                           n_lines=args.lines, seed=args.seed)
+        except ValueError as err:
+            raise ValueError(f"{args.dump}: {err}") from None
         text = json.dumps(to_report_units(metrics), indent=2)
         if args.json:
             write_text(text + "\n", args.json)
