@@ -10,7 +10,6 @@ import warnings
 
 import numpy as np
 from scipy.linalg import cho_solve, solve_triangular
-from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.ensemble import ExtraTreesRegressor
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
@@ -18,7 +17,7 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
-from analysis.surrogate.network import make_surrogate
+from analysis.surrogate.network import MetricsRegressor, make_surrogate
 
 #: Candidate names and what they are (for tables and the report).
 CANDIDATES = {
@@ -28,7 +27,7 @@ CANDIDATES = {
 }
 
 
-class GPSurrogate(RegressorMixin, BaseEstimator):
+class GPSurrogate(MetricsRegressor):
     """One Gaussian process per metric over standardised (U, omega), anisotropic RBF + noise.
 
     Kernel of each metric (on standardised inputs and targets):
@@ -72,9 +71,9 @@ class GPSurrogate(RegressorMixin, BaseEstimator):
                 * RBF(np.ones(n_inputs), tuple(self.length_scale_bounds))
                 + WhiteKernel(0.1, tuple(self.noise_bounds)))
 
-    def fit(self, X, Y):
-        """Fit on X (n, 2) [mm/s, rad/s] and Y (n, 4) [metric units]."""
-        X, Y = np.asarray(X, float), np.asarray(Y, float)
+    def fit(self, X, y):
+        """Fit on X (n, 2) [mm/s, rad/s] and y (n, 4) [metric units]."""
+        X, Y = self._validate_fit(X, y)
         self.x_scaler_ = StandardScaler().fit(X)
         self.y_mean_ = Y.mean(axis=0)
         self.y_scale_ = np.where(Y.std(axis=0) > 0, Y.std(axis=0), 1.0)
@@ -119,11 +118,12 @@ class GPSurrogate(RegressorMixin, BaseEstimator):
 
     def predict(self, X, return_std=False):
         """Metrics at X (n, 2); with ``return_std`` also the posterior std of the mean, (n, 4)."""
-        Xs = self.x_scaler_.transform(np.asarray(X, float))
+        X = self._validate_predict(X)
+        Xs = self.x_scaler_.transform(X)
         mean = np.column_stack([gp.predict(Xs) for gp in self.gps_]) * self.y_scale_ + self.y_mean_
         if not return_std:
-            return mean
-        return mean, np.sqrt(self._latent_var(Xs)) * self.y_scale_
+            return self._shaped(mean)
+        return self._shaped(mean), self._shaped(np.sqrt(self._latent_var(Xs)) * self.y_scale_)
 
     def loo_residuals(self):
         """Leave-one-run-out residuals y - y_loo of the training runs, (n, 4), metric units.
@@ -138,7 +138,7 @@ class GPSurrogate(RegressorMixin, BaseEstimator):
         return out * self.y_scale_
 
 
-class MLPEnsemble(RegressorMixin, BaseEstimator):
+class MLPEnsemble(MetricsRegressor):
     """The paper's network fitted from ``n_members`` random seeds; mean and spread.
 
     Member k is :func:`analysis.surrogate.network.make_surrogate` with ``random_state
@@ -159,24 +159,26 @@ class MLPEnsemble(RegressorMixin, BaseEstimator):
         self.params = params
         self.n_members = n_members
 
-    def fit(self, X, Y):
-        """Fit every member on X (n, 2) [mm/s, rad/s] and Y (n, 4)."""
+    def fit(self, X, y):
+        """Fit every member on X (n, 2) [mm/s, rad/s] and y (n, 4)."""
+        X, Y = self._validate_fit(X, y)
         n_init = int(self.params["n_init"])
         base = int(self.params["random_state"])
-        self.members_ = [make_surrogate({**self.params, "random_state": base + k * n_init}).fit(X, Y)
+        self.members_ = [make_surrogate({**self.params, "random_state": base + k * n_init}).fit(X, self._shaped(Y))
                          for k in range(int(self.n_members))]
         return self
 
     def predict(self, X, return_std=False):
         """Mean of the members (n, 4); with ``return_std`` also their standard deviation (ddof 1)."""
-        P = np.stack([m.predict(np.asarray(X, float)) for m in self.members_])
+        X = self._validate_predict(X)
+        P = np.stack([m.predict(X) for m in self.members_])
         mean = P.mean(axis=0)
         if not return_std:
             return mean
         return mean, P.std(axis=0, ddof=1) if len(P) > 1 else np.zeros_like(mean)
 
 
-class TreeEnsemble(RegressorMixin, BaseEstimator):
+class TreeEnsemble(MetricsRegressor):
     """Extremely randomised trees on standardised targets; mean and spread of the trees.
 
     Parameters
@@ -193,24 +195,25 @@ class TreeEnsemble(RegressorMixin, BaseEstimator):
         self.random_state = random_state
         self.min_samples_leaf = min_samples_leaf
 
-    def fit(self, X, Y):
-        """Fit on X (n, 2) [mm/s, rad/s] and Y (n, 4)."""
-        Y = np.asarray(Y, float)
+    def fit(self, X, y):
+        """Fit on X (n, 2) [mm/s, rad/s] and y (n, 4)."""
+        X, Y = self._validate_fit(X, y)
         self.y_mean_ = Y.mean(axis=0)
         self.y_scale_ = np.where(Y.std(axis=0) > 0, Y.std(axis=0), 1.0)
         self.forest_ = ExtraTreesRegressor(int(self.n_trees), random_state=int(self.random_state),
                                            min_samples_leaf=int(self.min_samples_leaf))
-        self.forest_.fit(np.asarray(X, float), (Y - self.y_mean_) / self.y_scale_)
+        self.forest_.fit(X, (Y - self.y_mean_) / self.y_scale_)
         return self
 
     def predict(self, X, return_std=False):
         """Forest mean (n, 4); with ``return_std`` also the trees' standard deviation."""
-        X = np.asarray(X, float)
-        if not return_std:
-            return self.forest_.predict(X) * self.y_scale_ + self.y_mean_
+        X = self._validate_predict(X)
         P = np.stack([t.predict(X) for t in self.forest_.estimators_]).reshape(
             len(self.forest_.estimators_), len(X), -1)
-        return P.mean(axis=0) * self.y_scale_ + self.y_mean_, P.std(axis=0) * self.y_scale_
+        mean = P.mean(axis=0) * self.y_scale_ + self.y_mean_
+        if not return_std:
+            return self._shaped(mean)
+        return self._shaped(mean), self._shaped(P.std(axis=0) * self.y_scale_)
 
 
 def make_candidate(name, params):

@@ -47,6 +47,7 @@ from sklearn.model_selection import cross_val_predict
 from sklearn.neural_network import MLPRegressor
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
+from sklearn.utils.validation import check_is_fitted, validate_data
 from threadpoolctl import threadpool_limits
 
 from analysis.metrics.dataset import INPUTS, point_groups
@@ -57,7 +58,35 @@ _MODEL_KEYS = ("hidden_units", "activation", "alpha", "solver",
                "learning_rate_init", "max_iter", "random_state")
 
 
-class RestartedMLP(RegressorMixin, BaseEstimator):
+class MetricsRegressor(RegressorMixin, BaseEstimator):
+    """Base of the surrogates: scikit-learn's input checks for one or several targets.
+
+    ``fit`` validates X (finite, dense, 2-d) and y (1-d: one metric, or 2-d: several) and
+    sets ``n_features_in_``; ``predict`` checks that the model is fitted and that X has
+    as many columns. Predictions have y's shape: 1-d for a 1-d y.
+    """
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.target_tags.multi_output = True
+        return tags
+
+    def _validate_fit(self, X, y):
+        """(X, Y) as float arrays, Y 2-d; remembers whether y was 1-d."""
+        X, y = validate_data(self, X, y, multi_output=True, y_numeric=True)
+        self.single_target_ = np.ndim(y) == 1
+        return np.asarray(X, float), np.asarray(y, float).reshape(len(y), -1)
+
+    def _validate_predict(self, X):
+        check_is_fitted(self)
+        return np.asarray(validate_data(self, X, reset=False), float)
+
+    def _shaped(self, Y):
+        """Predictions (n, k) in the shape of the training y."""
+        return Y[:, 0] if self.single_target_ else Y
+
+
+class RestartedMLP(MetricsRegressor):
     """An ``MLPRegressor`` fitted from ``n_init`` initialisations; the best one is kept.
 
     Restart k uses ``random_state + k``; the fit with the lowest final training
@@ -99,6 +128,8 @@ class RestartedMLP(RegressorMixin, BaseEstimator):
         by 200 units), and with other jobs on the cores OpenBLAS's threads
         turned a 0.5 s fit into 8 s.
         """
+        X, Y = self._validate_fit(X, y)
+        y = self._shaped(Y)
         mlp = MLPRegressor() if self.mlp is None else self.mlp
         seed = 0 if mlp.random_state is None else int(mlp.random_state)
         fits = []
@@ -115,7 +146,8 @@ class RestartedMLP(RegressorMixin, BaseEstimator):
         return self
 
     def predict(self, X):
-        """Predictions of the kept network, shape (n, 4)."""
+        """Predictions of the kept network, shape (n, 4) (or (n,) for a 1-d y)."""
+        X = self._validate_predict(X)
         return self.best_.predict(X)
 
 
