@@ -136,7 +136,10 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
                 feed_length(pile * 1e-3, config["material"]["density_kg_m3"], config["roller"]["diameter_mm"] / 2e3,
                             config["roller"]["gap_um"] * 1e-6)
             except ValueError as err:
-                _fail(f"fidelity.{name}.feed_pile_mg_per_mm", pile, str(err))
+                _fail(f"fidelity.{name}.feed_pile_mg_per_mm", pile,
+                      f"{err} mg/mm at material.density_kg_m3 = {config['material']['density_kg_m3']!r}, "
+                      f"roller.diameter_mm = {config['roller']['diameter_mm']!r} and "
+                      f"roller.gap_um = {config['roller']['gap_um']!r}")
         if lvl["sampling_start_mm"] < lvl["heap_length_mm"]:
             _fail(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
                   f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")
