@@ -23,6 +23,13 @@ from analysis.metrics.dump import read_dump
 HALF_WRITTEN_PATTERNS = ("*.part", ".*.tmp-*")
 
 
+def _with_flags(cmd, *flags):
+    """``cmd`` with ``flags`` added before its targets (after a ``--``, flags would be targets)."""
+    cmd = list(cmd)
+    at = cmd.index("--") if "--" in cmd else len(cmd)
+    return [*cmd[:at], *flags, *cmd[at:]]
+
+
 def _runs_in_progress(runs: Path) -> set[str]:
     """Run folders whose spread has started (an input is written) but not finished."""
     return {p.parent.name for p in runs.glob("*/spread.in") if not (p.parent / "health.json").exists()}
@@ -52,7 +59,7 @@ def kill_at_random(cmd, workdir, runs, delay_s: float, timeout_s: float = 3600) 
 def resume(cmd, workdir, timeout_s: float = 3600) -> dict:
     """Unlock the working directory and run ``cmd`` to its end (the README's resume)."""
     start = time.perf_counter()
-    subprocess.run([*cmd, "--unlock"], cwd=workdir, capture_output=True, check=True, timeout=timeout_s)
+    subprocess.run(_with_flags(cmd, "--unlock"), cwd=workdir, capture_output=True, check=True, timeout=timeout_s)
     proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=timeout_s)
     log = proc.stdout + proc.stderr
     return {"returncode": proc.returncode, "wall_s": time.perf_counter() - start,
@@ -68,8 +75,9 @@ def campaign(cmd, workdir, runs, n_kills: int, max_delay_s: float, seed: int = 0
     """
     rng = np.random.default_rng(seed)
     attempts, interrupted = [], set()
+    Path(workdir).mkdir(parents=True, exist_ok=True)
     for k in range(n_kills):
-        subprocess.run([*cmd, "--unlock"], cwd=workdir, capture_output=True, timeout=600)
+        subprocess.run(_with_flags(cmd, "--unlock"), cwd=workdir, capture_output=True, timeout=600)
         attempt = kill_at_random(cmd, workdir, runs, float(rng.uniform(min_delay_s, max_delay_s)))
         attempts.append(attempt)
         interrupted.update(attempt["interrupted"])

@@ -26,12 +26,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 from bench_layer_metrics import machine
 
 from analysis.faults import campaign, compare_runs, half_written_files
 from analysis.metrics.dataset import METRICS
+from analysis.metrics.noise_floor import POOLED, noise_floor
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = "results/smoke/dataset.csv"
@@ -45,9 +45,8 @@ def snakemake(workdir):
 
 def seed_tolerance(k=4.0):
     """k pooled seed-to-seed sds of the smoke scene per metric (noise_smoke.csv)."""
-    noise = pd.read_csv(ROOT / "benchmarks/measured/noise_smoke.csv")
-    var = noise.groupby(["U_mm_s", "omega_rad_s"])[list(METRICS)].var(ddof=1).mean()
-    return {m: float(k * np.sqrt(var[m])) for m in METRICS}
+    pooled = noise_floor(pd.read_csv(ROOT / "benchmarks/measured/noise_smoke.csv")).set_index("point").loc[POOLED]
+    return {m: k * float(pooled[f"{m}_sd"]) for m in METRICS}
 
 
 def main(argv=None):

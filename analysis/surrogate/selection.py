@@ -43,7 +43,6 @@ from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, targ
 from analysis.surrogate.network import _convergence_messages
 from analysis.surrogate.scores import _num, regression_scores
 
-#: Defaults of the model-choice keys of config.yaml's ``surrogate:`` section (tests only).
 
 def _fold(name, p, X, Y, train, test):
     """Fit a fresh ``name`` candidate on one fold: (test rows, their predictions, ConvergenceWarnings, fit s)."""
