@@ -38,13 +38,13 @@ def trend_table(data: pd.DataFrame, roller_radius_mm: float) -> list[tuple[str, 
                  "yes" if neg.roughness_um.mean() > pos.roughness_um.mean() else "no"))
     por = mean.pivot(index="U_mm_s", columns="omega_rad_s", values="porosity_pct")
     bottom = mean.U_mm_s + mean.omega_rad_s * roller_radius_mm
-    at_rest = mean.loc[(bottom.abs() <= 25)]
+    at_rest, moving = mean.loc[bottom.abs() <= 25], mean.loc[bottom.abs() > 25]
     peak = mean.loc[mean.porosity_pct.idxmax()]
     rows.append(("Phi peaks where the roller's bottom point is at rest (U = -omega R)",
                  f"max Phi {peak.porosity_pct:.1f} % at U = {peak.U_mm_s:g} mm/s, omega = {peak.omega_rad_s:g} rad/s "
                  f"(bottom speed {peak.U_mm_s + peak.omega_rad_s * roller_radius_mm:+.0f} mm/s); mean Phi where "
                  f"bottom speed within 25 mm/s: {at_rest.porosity_pct.mean():.1f} %, "
-                 f"elsewhere {mean.porosity_pct.mean():.1f} %",
+                 f"elsewhere {moving.porosity_pct.mean():.1f} %",
                  "yes" if abs(peak.U_mm_s + peak.omega_rad_s * roller_radius_mm) <= 25 else "no"))
     rising_phi = np.mean([np.all(np.diff(por[w].to_numpy()) > 0) for w in por.columns])
     rows.append(("Phi increases monotonically with U at constant omega",
