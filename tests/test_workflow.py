@@ -14,11 +14,10 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from conftest import SMOKE_SEED_SD
 from PIL import Image
 
 from analysis.faults import campaign, compare_runs, half_written_files
-from analysis.metrics.dataset import METRICS
-from analysis.metrics.noise_floor import POOLED, noise_floor
 from tests.test_config import ROOT
 
 pytestmark = pytest.mark.xdist_group("workflow")
@@ -26,10 +25,7 @@ pytestmark = pytest.mark.xdist_group("workflow")
 TEST_CONFIG = yaml.safe_load((ROOT / ".test/config.yaml").read_text())
 OMEGAS = TEST_CONFIG["sweep"]["omega_rad_s"]
 FIRST_U = TEST_CONFIG["sweep"]["U_mm_s"]
-# 4 pooled seed-to-seed sds of the smoke scene, re-measured at the configured settings by
-# benchmarks/bench_fidelity.py (the command is in benchmarks/measured/noise_smoke.md)
-_NOISE = noise_floor(pd.read_csv(ROOT / "benchmarks/measured/noise_smoke.csv")).set_index("point").loc[POOLED]
-SEED_SPREAD = {m: 4 * float(_NOISE[f"{m}_sd"]) for m in METRICS}
+SEED_SPREAD = {m: 4 * sd for m, sd in SMOKE_SEED_SD.items()}  # 4 pooled seed sds of the smoke scene
 
 
 def snakemake_cmd(workdir, U, *extra):
