@@ -59,7 +59,7 @@ def kill_at_random(cmd, workdir, runs, delay_s: float, timeout_s: float = 3600) 
 def resume(cmd, workdir, timeout_s: float = 3600) -> dict:
     """Unlock the working directory and run ``cmd`` to its end (the README's resume)."""
     start = time.perf_counter()
-    subprocess.run(_with_flags(cmd, "--unlock"), cwd=workdir, capture_output=True, check=True, timeout=timeout_s)
+    subprocess.run(_with_flags(cmd, "--unlock"), cwd=workdir, capture_output=True, timeout=timeout_s)
     proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=timeout_s)
     log = proc.stdout + proc.stderr
     return {"returncode": proc.returncode, "wall_s": time.perf_counter() - start,

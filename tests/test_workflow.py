@@ -73,14 +73,16 @@ def test_random_kills_lose_nothing(workflow, tmp_path):
     workdir = tmp_path / "faulted"
     for stage in ("meshes", "settle"):  # the same geometry and heap: only the spreads are killed
         shutil.copytree(workflow / "results/smoke" / stage, workdir / "results/smoke" / stage)
-    cmd = snakemake_cmd(workdir, [100], "--", "results/smoke/dataset.csv")
+    # U = 100 mm/s at the CI's omegas and one more (4 points: the config check wants 3 to train on)
+    cmd = [*snakemake_cmd(workdir, [100]), f"sweep={json.dumps({'U_mm_s': [100], 'omega_rad_s': OMEGAS + [-5]})}",
+           'surrogate={"n_test": 1}', "--", "results/smoke/dataset.csv"]
     result = campaign(cmd, workdir, workdir / "results/smoke/runs", n_kills=2, min_delay_s=8, max_delay_s=40,
                       seed=1, log=lambda line: None)
     assert result["final"]["returncode"] == 0, result["final"]["log_tail"]
     assert result["kills"] >= 1
     data = pd.read_csv(workdir / "results/smoke/dataset.csv")
     names = [f"U100_w{w:g}_r0" for w in OMEGAS]
-    assert sorted(data.omega_rad_s) == sorted(OMEGAS) and set(data.U_mm_s) == {100}
+    assert sorted(data.omega_rad_s) == sorted([*OMEGAS, -5]) and set(data.U_mm_s) == {100}
     runs = compare_runs(workdir / "results/smoke/runs", workflow / "results/smoke/runs", names, SEED_SPREAD)
     for name, row in runs.items():
         if name not in result["interrupted"] or row["resumed_from_step"] == 0:
