@@ -16,6 +16,7 @@ from math import sqrt
 from pathlib import Path
 
 import jsonschema
+import numpy as np
 import yaml
 
 from analysis.physics import INSERTION_SOLID_FRACTION, feed_length, number_mean_volume, psd_classes, rayleigh_time
@@ -115,6 +116,15 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
               f"must be below psd.max_diameter_um = {psd['max_diameter_um']}")
     if not psd["min_diameter_um"] <= psd["mean_diameter_um"] <= psd["max_diameter_um"]:
         _fail("psd.mean_diameter_um", psd["mean_diameter_um"], "must lie between the min and max diameters")
+    far = max(("min_diameter_um", "max_diameter_um"),
+              key=lambda k: abs(psd[k] - psd["mean_diameter_um"]) / psd["std_diameter_um"])
+    for name, lvl in config["fidelity"].items():
+        d, w = psd_classes(psd["mean_diameter_um"], psd["std_diameter_um"], psd["min_diameter_um"],
+                           psd["max_diameter_um"], lvl["size_classes"])
+        if not (np.isfinite(d).all() and (w > 1e-9).all()):
+            _fail(f"psd.{far}", psd[far], f"leaves a size class of fidelity.{name} ({lvl['size_classes']} classes) "
+                  f"with no particles of the Gaussian (mean {psd['mean_diameter_um']}, sd {psd['std_diameter_um']} "
+                  "um): bring the range within a few sds of the mean, or use fewer size_classes")
     gap = config["roller"]["gap_um"]
     if gap < psd["min_diameter_um"]:
         _fail("roller.gap_um", gap, f"is below the smallest particle diameter ({psd['min_diameter_um']} um)")

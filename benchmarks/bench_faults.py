@@ -7,7 +7,8 @@ Run from the repository root::
 1. An uninterrupted workflow (the CI's config, ``.test/config.yaml``: 6 smoke runs) to
    ``results/smoke/dataset.csv`` in a scratch folder: the reference and its wall time T.
 2. The same workflow in a second folder, killed ``--kills`` times (SIGKILL to the whole
-   process group: Snakemake and LIGGGHTS) after a delay uniform in [2 s, T/2], each time
+   process group: Snakemake and LIGGGHTS) after a delay uniform in [2 s, 2T/kills] (so the
+   kills fall over the whole workflow, not only its start), each time
    resumed with the README's command (``--unlock``, then the same command), then run to its end.
 3. Checks: ``dataset.csv`` has every run once; runs never interrupted have final dumps
    bit-identical to the reference's; interrupted runs are bit-identical (restarted from
@@ -62,7 +63,8 @@ def main(argv=None):
         subprocess.run(snakemake(reference), check=True, capture_output=True)
         t_ref = time.perf_counter() - start
         print(f"uninterrupted: {t_ref:.0f} s", flush=True)
-        result = campaign(snakemake(faulted), faulted, faulted / "results/smoke/runs", args.kills, t_ref / 2,
+        max_delay = max(2 * t_ref / args.kills, 10.0)
+        result = campaign(snakemake(faulted), faulted, faulted / "results/smoke/runs", args.kills, max_delay,
                           seed=args.seed, log=lambda line: print(line, flush=True))
         data = pd.read_csv(faulted / TARGET)
         names = sorted(p.name for p in (reference / "results/smoke/runs").iterdir())
@@ -98,7 +100,7 @@ def main(argv=None):
         "",
         f"- Uninterrupted workflow ({len(names)} smoke runs to `{TARGET}`): {t_ref:.0f} s.",
         f"- Kills survived: {result['kills']} of {args.kills} planned (a workflow that finished before its kill "
-        f"ends the campaign), delays uniform in [2, {t_ref / 2:.0f}] s.",
+        f"ends the campaign), delays uniform in [2, {max_delay:.0f}] s.",
         f"- Spreads under way at a kill (re-done, from a checkpoint or from the start): {redone}, over "
         f"{len(interrupted)} distinct runs; {len(resumed)} finished from a checkpoint.",
         f"- Wall time of the killed attempts and the final run: {result['wall_s']:.0f} s, "

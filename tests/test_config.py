@@ -55,6 +55,7 @@ def test_shipped_config_is_valid_and_has_the_papers_design(base):
     ("sweep.U_mm_s", [float("nan"), 40, 70], "sweep.U_mm_s[0]"),
     ("fidelity.default.heap_length_mm", float("-inf"), "fidelity.default.heap_length_mm"),
     ("surrogate.alpha", float("inf"), "surrogate.alpha"),
+    ("psd.max_diameter_um", 1241.0, "no particles"),                      # found by tests/test_fuzz.py
     ("level", "huge", "level"),
     ("timestep.rayleigh_fraction", 0.6, "timestep.rayleigh_fraction"),
     ("material.colour", "grey", "colour"),
