@@ -101,8 +101,8 @@ def main(argv=None):
         f"- Uninterrupted workflow ({len(names)} smoke runs to `{TARGET}`): {t_ref:.0f} s.",
         f"- Kills survived: {result['kills']} of {args.kills} planned (a workflow that finished before its kill "
         f"ends the campaign), delays uniform in [2, {max_delay:.0f}] s.",
-        f"- Spreads under way at a kill (re-done, from a checkpoint or from the start): {redone}, over "
-        f"{len(interrupted)} distinct runs; {len(resumed)} finished from a checkpoint.",
+        f"- Runs started but unfinished at a kill: {redone} (kill, run) pairs over {len(interrupted)} distinct "
+        f"runs (each resumed from its newest checkpoint or started over); {len(resumed)} finished from a checkpoint.",
         f"- Wall time of the killed attempts and the final run: {result['wall_s']:.0f} s, "
         f"i.e. {result['wall_s'] - t_ref:.0f} s ({result['wall_s'] / t_ref - 1:.0%}) lost to the kills.",
         "- Tolerance for a resumed run: 4 pooled seed sds of the smoke scene (noise_smoke.csv): "
