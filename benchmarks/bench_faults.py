@@ -32,7 +32,7 @@ from bench_layer_metrics import machine
 
 from analysis.faults import campaign, compare_runs, half_written_files
 from analysis.metrics.dataset import METRICS
-from analysis.metrics.noise_floor import POOLED, noise_floor
+from analysis.metrics.noise_floor import pooled_seed_sd
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = "results/smoke/dataset.csv"
@@ -46,8 +46,8 @@ def snakemake(workdir):
 
 def seed_tolerance(k=4.0):
     """k pooled seed-to-seed sds of the smoke scene per metric (noise_smoke.csv)."""
-    pooled = noise_floor(pd.read_csv(ROOT / "benchmarks/measured/noise_smoke.csv")).set_index("point").loc[POOLED]
-    return {m: k * float(pooled[f"{m}_sd"]) for m in METRICS}
+    sd = pooled_seed_sd(pd.read_csv(ROOT / "benchmarks/measured/noise_smoke.csv"))
+    return {m: k * v for m, v in sd.items()}
 
 
 def main(argv=None):

@@ -15,10 +15,8 @@ ROLLER_RADIUS_MM = yaml.safe_load((Path(__file__).resolve().parents[1] / "config
 def _smoke_seed_sd():
     """Pooled seed-to-seed sd of each metric on the smoke scene (dataset units), from the noise
     floor re-measured at the configured settings (command: benchmarks/measured/noise_smoke.md)."""
-    from analysis.metrics.noise_floor import POOLED, noise_floor
-    noise = pd.read_csv(Path(__file__).resolve().parents[1] / "benchmarks/measured/noise_smoke.csv")
-    pooled = noise_floor(noise).set_index("point").loc[POOLED]
-    return {m: float(pooled[f"{m}_sd"]) for m in ("mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct")}
+    from analysis.metrics.noise_floor import pooled_seed_sd
+    return pooled_seed_sd(pd.read_csv(Path(__file__).resolve().parents[1] / "benchmarks/measured/noise_smoke.csv"))
 
 
 SMOKE_SEED_SD = _smoke_seed_sd()

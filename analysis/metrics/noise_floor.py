@@ -71,6 +71,13 @@ def noise_floor(df):
     return table
 
 
+def pooled_seed_sd(df) -> dict:
+    """The pooled seed-to-seed sd of each metric (dataset units): the ``pooled`` row of
+    :func:`noise_floor`, as ``{metric: sd}``."""
+    pooled = noise_floor(df).set_index("point").loc[POOLED]
+    return {m: float(pooled[f"{m}_sd"]) for m in METRICS}
+
+
 def _relative(sd, mean):
     sd, mean = np.asarray(sd, float), np.asarray(mean, float)
     with np.errstate(divide="ignore", invalid="ignore"):
