@@ -24,7 +24,7 @@ map: setup
 
 test: setup
 	PYTHON=$(PYTHON) .ci/lint
-	$(PYTHON) -m pytest -n 2 --dist loadgroup -q tests
+	$(PYTHON) -m pytest -n 2 --dist loadscope --no-loadscope-reorder -q tests
 
 setup: system-packages $(VENV)/.installed
 

@@ -22,8 +22,6 @@ from analysis.dem.simulate import make_geometry, settle, spread
 from analysis.metrics.dump import read_dump
 from tests.test_config import ROOT  # noqa: E402
 
-pytestmark = pytest.mark.xdist_group("liggghts_smoke")
-
 U_MM_S, OMEGA = 100.0, -5.0
 
 

@@ -13,8 +13,6 @@ import yaml
 from analysis.config import load_config, scene
 from analysis.dem.liggghts import mpi_command
 
-pytestmark = pytest.mark.xdist_group("profiles")
-
 ROOT = Path(__file__).resolve().parent.parent
 CLUSTER_RULES = {"settle", "spread"}   # submitted to SLURM; every other rule is a localrule
 

@@ -20,8 +20,6 @@ from analysis.dem.liggghts import LiggghtsError
 from analysis.dem.simulate import make_geometry, settle
 from analysis.metrics.dataset import SupplyLimitedError, UnsoundRunError, check_run
 
-pytestmark = pytest.mark.xdist_group("liggghts_smoke")
-
 
 def thermo(vmax, energy=None):
     steps = 1000 * np.arange(len(vmax))

@@ -20,8 +20,6 @@ from PIL import Image
 from analysis.faults import campaign, compare_runs, half_written_files
 from tests.test_config import ROOT
 
-pytestmark = pytest.mark.xdist_group("workflow")
-
 TEST_CONFIG = yaml.safe_load((ROOT / ".test/config.yaml").read_text())
 OMEGAS = TEST_CONFIG["sweep"]["omega_rad_s"]
 FIRST_U = TEST_CONFIG["sweep"]["U_mm_s"]
