@@ -19,6 +19,7 @@ intervals as crosses along its iso-lines, the coverage level in each caption.
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -193,9 +194,14 @@ def interval_figure(model, df, split, metric, n=41):
            title=f"{TITLES[metric]}: {level} single-run interval")
     fig.colorbar(filled, ax=ax, label=f"half-width of the {level} interval of {LABELS[metric]}")
     ax.legend(loc="upper left", fontsize=8, framealpha=0.8)
-    fig.text(0.01, 0.005, f"{level} of new DEM runs fall within prediction +- this (calibrated by grouped "
-             "cross-conformal prediction on held-out runs, run-to-run noise included)", fontsize=7.5)
+    _caption(fig, f"{level} of new DEM runs fall within the prediction +- this (calibrated by grouped "
+             "cross-conformal prediction on held-out runs; run-to-run noise included)")
     return fig
+
+
+def _caption(fig, text, width=95):
+    """A small caption under the axes, wrapped; the constrained layout makes room for it."""
+    fig.supxlabel(textwrap.fill(text, width), fontsize=8, ha="center")
 
 
 def _level(model):
@@ -358,8 +364,8 @@ def process_map_figure(model, df, split, n=101):
     ax.legend(loc="best", fontsize=9)
     ax.grid(alpha=0.3)
     if with_intervals:
-        fig.text(0.01, 0.005, f"Crosses: the {_level(model)} interval of the indices of a single new run "
-                 "(calibrated by grouped cross-conformal prediction on held-out runs)", fontsize=7.5)
+        _caption(fig, f"Crosses: the {_level(model)} interval of the indices of a single new run "
+                 "(calibrated by grouped cross-conformal prediction on held-out runs; run-to-run noise included)")
     return fig
 
 
