@@ -224,3 +224,18 @@ def test_maps_draw_the_calibrated_interval_with_its_level(monotone_model, tmp_pa
     assert "90 % of new DEM runs" in (tmp_path / "phi.svg").read_text()
     svg = (tmp_path / "map.svg").read_text()
     assert "90 % single-run interval" in svg and "cross-conformal" in svg
+
+
+def test_the_adaptive_designs_gp_is_saved_calibrated(tmp_path, fit_params):
+    from types import SimpleNamespace
+
+    from analysis.surrogate.adaptive import write_result
+    from analysis.surrogate.persistence import load_surrogate
+    data = synthetic_dataset(2, noise=NOISE).iloc[::3].reset_index(drop=True)        # 15 runs
+    result = SimpleNamespace(design=data[["U_mm_s", "omega_rad_s"]], rounds=pd.DataFrame({"round": [0]}),
+                             data=data, stop="budget",
+                             model=GPSurrogate(n_restarts=0).fit(inputs_of(data), targets_of(data)))
+    write_result(result, tmp_path, "smoke", surrogate_params={**fit_params, "cv_repeats": 1})
+    model, meta = load_surrogate(tmp_path / "model.joblib")
+    assert meta["model"]["intervals"]["n_calibration_runs"] == 15
+    assert recommend(model, meta, 60.0, n=21)["confidence"] == fit_params["confidence"]
