@@ -194,10 +194,10 @@ def test_cli_prints_the_interval_it_used(monotone_model, capsys):
     out = capsys.readouterr().out
     assert "upper end of the 90 % single-run interval within each limit" in out
     assert "Phi = 3" in out and "(a run: " in out
-    assert main(["--max-porosity", "28.3", "--confidence", "0.99", "--grid-points", "101",
+    assert main(["--max-porosity", "28.3", "--confidence", "0.97", "--grid-points", "101",
                  "--model", str(path)]) == 1
     out = capsys.readouterr().out
-    assert "at none does the 99 % single-run interval stay within the limits" in out
+    assert "at none does the 97 % single-run interval stay within the limits" in out
     assert "lower --confidence" in out
 
 
@@ -239,3 +239,17 @@ def test_the_adaptive_designs_gp_is_saved_calibrated(tmp_path, fit_params):
     model, meta = load_surrogate(tmp_path / "model.joblib")
     assert meta["model"]["intervals"]["n_calibration_runs"] == 15
     assert recommend(model, meta, 60.0, n=21)["confidence"] == fit_params["confidence"]
+
+
+def test_too_few_runs_for_the_level_is_said_not_drawn(monotone_model, tmp_path, capsys):
+    gp, meta = monotone_model[0].model, monotone_model[1]
+    few = CalibratedSurrogate(gp, np.ones(6), np.full(6, 0.02), np.ones((6, 6)), 6, CONFIDENCE)
+    assert few.runs_needed() == 9 and not few.is_finite() and few.is_finite(0.85)
+    with pytest.raises(ValueError, match="needs at least 9 calibration runs for a finite interval; this model has 6"):
+        recommend(few, meta, 34.0, n=21)
+    df = synthetic_dataset(1, noise=0.02, metrics=monotone)
+    split = split_runs(df, 10, 0)
+    interval_figure(few, df, split, "porosity_pct", n=11).savefig(tmp_path / "phi.svg")
+    process_map_figure(few, df, split, n=21).savefig(tmp_path / "map.svg")
+    assert "at least 9 needed" in (tmp_path / "phi.svg").read_text()
+    assert "No interval crosses" in (tmp_path / "map.svg").read_text()

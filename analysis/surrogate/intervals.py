@@ -259,6 +259,15 @@ class CalibratedSurrogate:
         return conformal_quantile(self.scores, self.confidence if confidence is None else confidence,
                                   self.n_runs)
 
+    def runs_needed(self, confidence=None):
+        """Least calibration runs for a finite interval at ``confidence``: ``ceil(c / (1 - c))``."""
+        c = self.confidence if confidence is None else check_confidence(confidence)
+        return math.ceil(c / (1 - c) - 1e-9)
+
+    def is_finite(self, confidence=None):
+        """True if there are enough calibration runs for finite intervals at ``confidence``."""
+        return self.n_runs >= self.runs_needed(confidence)
+
     def predict_interval(self, X, confidence=None, kind="run"):
         """Lower and upper ends of the central intervals of the six :data:`QUANTITIES` at X.
 

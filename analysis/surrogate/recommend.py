@@ -78,8 +78,8 @@ def recommend(model, meta, max_porosity_pct, max_roughness_um=None, n=201, confi
     Raises
     ------
     ValueError
-        A negative or NaN limit, a confidence outside (0, 1), n < 2, or metadata
-        without the swept range.
+        A negative or NaN limit, a confidence outside (0, 1) or too high for the
+        model's calibration runs, n < 2, or metadata without the swept range.
     """
     _check_limit("max porosity (%)", max_porosity_pct)
     _check_limit("max roughness (um)", max_roughness_um)
@@ -88,6 +88,10 @@ def recommend(model, meta, max_porosity_pct, max_roughness_um=None, n=201, confi
         confidence = check_confidence(confidence)
     if with_intervals:
         confidence = model.confidence if confidence is None else confidence
+        if not model.is_finite(confidence):
+            raise ValueError(f"confidence {confidence:g} needs at least {model.runs_needed(confidence)} calibration "
+                             f"runs for a finite interval; this model has {model.n_runs}: use a confidence of at "
+                             f"most {model.n_runs / (model.n_runs + 1):.3g}, or more runs")
     else:
         confidence = None
     if "input_range" not in meta:

@@ -185,6 +185,10 @@ def interval_figure(model, df, split, metric, n=41):
     level = _level(model)
     fig = _figure(figsize=(7.5, 6.2), layout="constrained")
     ax = fig.add_subplot()
+    if not np.isfinite(half).all():        # too few calibration runs for this level
+        ax.text(0.5, 0.5, _too_few(model), ha="center", va="center", transform=ax.transAxes, wrap=True)
+        ax.set(xlabel=LABELS["omega_rad_s"], ylabel=LABELS["U_mm_s"], title=f"{TITLES[metric]}: no {level} interval")
+        return fig
     filled = ax.contourf(omega, U, half, levels=14, cmap="viridis")
     for rows, colour, marker, label in ((split[0], _TRAIN, "o", "training runs"),
                                         (split[1], _TEST, "s", "test runs")):
@@ -201,7 +205,12 @@ def interval_figure(model, df, split, metric, n=41):
 
 def _caption(fig, text, width=95):
     """A small caption under the axes, wrapped; the constrained layout makes room for it."""
-    fig.supxlabel(textwrap.fill(text, width), fontsize=8, ha="center")
+    fig.supxlabel(textwrap.fill(text, width, break_on_hyphens=False), fontsize=8, ha="center")
+
+
+def _too_few(model):
+    return (f"{model.n_runs} held-out runs calibrate no finite {_level(model)} interval "
+            f"(at least {model.runs_needed()} needed)")
 
 
 def _level(model):
@@ -320,7 +329,7 @@ def process_map_figure(model, df, split, n=101):
                                         (omega_values.min(), omega_values.max()), n))
     lines = process_map_lines(model, U_values, omega_values, maxima, n)
     runs_t, runs_d = hybrid_indices(df, maxima)
-    with_intervals = provides_intervals(model)
+    with_intervals = provides_intervals(model) and model.is_finite()
     if with_intervals:
         index_intervals(lines, maxima)
 
@@ -366,6 +375,8 @@ def process_map_figure(model, df, split, n=101):
     if with_intervals:
         _caption(fig, f"Crosses: the {_level(model)} interval of the indices of a single new run "
                  "(calibrated by grouped cross-conformal prediction on held-out runs; run-to-run noise included)")
+    elif provides_intervals(model):
+        _caption(fig, f"No interval crosses: {_too_few(model)}")
     return fig
 
 
