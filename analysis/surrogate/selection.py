@@ -424,7 +424,8 @@ def chosen_summary(model, info, df, split, table):
     _, ranking = choose_model(table)
     return {**info,
             "fitted_on": "the training points of the paper-style split (test points unseen)",
-            "predictive_std": "std of the predicted mean: " + {
+            "predictive_std": "std of the predicted mean (grid.csv *_std; with calibrated intervals "
+                              "inflated by their std_inflation c): " + {
                 "gp": "Gaussian-process posterior (noise term excluded)",
                 "mlp": "spread of the ensemble's networks",
                 "trees": "spread of the trees"}[info["name"]],
