@@ -16,12 +16,13 @@ rule noise_floor:
 
 
 rule model_choice:
-    """Candidate surrogates (paper MLP, GP, trees) scored by grouped repeated k-fold and LOO CV."""
+    """Candidate surrogates (paper MLP, GP, trees) and their intervals scored by grouped repeated k-fold and LOO CV."""
     input:
         dataset=rules.dataset.output[0],
     output:
         csv=f"{OUT}/surrogate/model_choice.csv",
         md=report(f"{OUT}/surrogate/model_choice.md", caption="../report/model_choice.rst", category="Surrogate"),
+        predictions=f"{OUT}/surrogate/cv_predictions.csv",
     log:
         f"{LOGS}/model_choice.log",
     benchmark:
@@ -35,10 +36,11 @@ rule model_choice:
 
 
 rule surrogate:
-    """The paper's Table 2 network's scores, and the chosen model (with its predictive std) and grid."""
+    """The paper's Table 2 network's scores, and the chosen model (with its calibrated intervals) and grid."""
     input:
         dataset=rules.dataset.output[0],
         choice=rules.model_choice.output.csv,
+        predictions=rules.model_choice.output.predictions,
     output:
         model=f"{OUT}/surrogate/model.joblib",
         scores=report(f"{OUT}/surrogate/scores.json", caption="../report/scores.rst", category="Surrogate"),

@@ -1,11 +1,13 @@
 """Snakemake entry: the paper's network (Table 2) scores, then the model chosen by
-cross-validation fitted on the same training points; write model, scores, split, grid."""
+cross-validation fitted on the same training points, its intervals calibrated on its
+held-out predictions; write model, scores, split, grid."""
 
 import pandas as pd
 
 from analysis.io import atomic_path, write_json
 from analysis.rule import rule_context
 from analysis.surrogate.data import split_table
+from analysis.surrogate.intervals import calibrated_from_predictions, relative_noise
 from analysis.surrogate.network import fit_surrogate
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import predict_grid
@@ -19,7 +21,13 @@ with rule_context(snakemake):
     print(format_scores(scores))
     name, table = read_choice(snakemake.input.choice)
     model, info = fit_chosen(df, params, name, scores["split"]["train"])
-    scores["model"] = chosen_summary(model, info, df, scores["split"], table)
+    held_out = pd.read_csv(snakemake.input.predictions)
+    held_out = held_out[(held_out["model"] == name) & (held_out["scheme"] == "kfold")]
+    rho, source = relative_noise(df, random_state=int(params["random_state"]))
+    model = calibrated_from_predictions(model, held_out, df, rho, params["confidence"], source)
+    scores["model"] = {**chosen_summary(model, info, df, scores["split"], table), "intervals": model.summary()}
+    print(f"intervals: {model.method}; {100 * model.confidence:g} % multiplier "
+          + " / ".join(f"{q:.2f}" for q in model.multiplier()[:4]) + f"; noise: {source}")
     print(f"chosen by cross-validation: {name} ({info['description']}); test R "
           + " / ".join(f"{s['R']:.3f}" if s["R"] is not None else "n/a"
                        for s in scores["model"]["test"].values()))

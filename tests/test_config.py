@@ -61,6 +61,8 @@ def test_shipped_config_is_valid_and_has_the_papers_design(base):
     ("material.colour", "grey", "colour"),
     ("roller.diameter_mm", KeyError, "diameter_mm"),
     ("surrogate.n_test", 44, "surrogate.n_test"),
+    ("surrogate.confidence", 1.5, "surrogate.confidence"),
+    ("surrogate.confidence", 0, "surrogate.confidence"),
     ("fidelity.default.feed_pile_mg_per_mm", 500, "feed_pile_mg_per_mm"),   # does not fit ahead of the roller
     ("fidelity.default.feed_pile_mg_per_mm", -3, "feed_pile_mg_per_mm"),
 ])

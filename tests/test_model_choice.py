@@ -1,5 +1,5 @@
-"""Replicates, noise floor, candidate surrogates with a predictive std, cross-validated choice,
-uncertainty maps and the recommendation's margin: on synthetic data whose truth is known."""
+"""Replicates, noise floor, candidate surrogates with a predictive std, cross-validated choice:
+on synthetic data whose truth is known (their calibrated intervals: tests/test_intervals.py)."""
 
 import re
 import runpy
@@ -13,9 +13,7 @@ from analysis.metrics.dataset import METRICS, point_groups, point_means
 from analysis.metrics.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown
 from analysis.surrogate.candidates import GPSurrogate, MLPEnsemble, TreeEnsemble, make_candidate
 from analysis.surrogate.data import inputs_of, point_folds, split_runs, targets_of
-from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import predict_grid, predict_with_std
-from analysis.surrogate.recommend import main, recommend
 from analysis.surrogate.selection import (
     choose_model,
     cross_validate_models,
@@ -196,7 +194,8 @@ def test_cv_table_has_every_model_scheme_and_metric(cv_small):
     assert len(table) == 3 * 2 * 4
     assert set(table["model"]) == {"mlp", "gp", "trees"}
     assert set(table["scheme"]) == {"kfold", "loo"}
-    assert np.isfinite(table[["R", "R2", "MAPE_pct", "R_sd", "R2_sd"]].to_numpy()).all()
+    assert np.isfinite(table[["R", "R2", "MAPE_pct", "R_sd", "R2_sd", "coverage_pct", "width_pct",
+                              "interval_score_pct", "std_coverage_pct"]].to_numpy()).all()
     assert (table.loc[table.scheme == "kfold", "n_splits"] == 10).all()      # 5 folds x 2 repeats
     assert (table.loc[table.scheme == "loo", "n_splits"] == 25).all()        # one per point
     # on a smooth function every candidate is far better than the mean
@@ -214,10 +213,11 @@ def test_choice_is_the_best_mean_kfold_r2_and_is_written(cv_small, tmp_path):
     chosen, ranking = choose_model(table, params["models"])
     kfold = table[table.scheme == "kfold"].groupby("model")["R2"].mean()
     assert chosen == kfold.idxmax() and ranking.index[0] == chosen
-    write_model_choice(table, chosen, tmp_path / "c.csv", tmp_path / "c.md")
+    write_model_choice(table, chosen, tmp_path / "c.csv", tmp_path / "c.md", confidence=0.9, min_coverage=85)
     name, back = read_choice(tmp_path / "c.csv")
     assert name == chosen and len(back) == len(table)
-    assert f"Chosen: **{chosen}**" in (tmp_path / "c.md").read_text()
+    text = (tmp_path / "c.md").read_text()
+    assert f"Chosen: **{chosen}**" in text and "## Intervals: 90 % single-run" in text
 
 
 def test_folds_fitted_in_parallel_score_the_same(cv_small):
@@ -255,15 +255,20 @@ def test_scripts_write_noise_floor_and_model_choice(tmp_path, fake_snakemake, fi
     params = {**fit_params, "models": ["gp", "trees"], "cv_repeats": 1,
               "cv_folds": 3, "cv_loo": False, "tree_count": 20}
     smk = fake_snakemake({"dataset": str(tmp_path / "dataset.csv")},
-                         {"csv": str(tmp_path / "mc.csv"), "md": str(tmp_path / "mc.md")},
+                         {"csv": str(tmp_path / "mc.csv"), "md": str(tmp_path / "mc.md"),
+                          "predictions": str(tmp_path / "cv.csv")},
                          {"surrogate": params, "level": "smoke"})
     runpy.run_path(str(smk.scriptdir / "model_choice.py"), init_globals={"snakemake": smk})
     name, table = read_choice(tmp_path / "mc.csv")
     assert name in ("gp", "trees") and len(table) == 2 * 4
-    assert "noise ceiling" in (tmp_path / "mc.md").read_text()
+    text = (tmp_path / "mc.md").read_text()
+    assert "noise ceiling" in text and "interval score" in text
+    held_out = pd.read_csv(tmp_path / "cv.csv")
+    assert len(held_out) == 2 * len(df) and set(held_out["model"]) == {"gp", "trees"}
+    assert {f"{m}_std" for m in METRICS} <= set(held_out.columns)
 
 
-# --- uncertainty on the maps and in the recommendation ---------------------------------------
+# --- uncertainty on the maps (the recommendation: tests/test_intervals.py) -----------------
 
 def test_grid_and_maps_carry_the_predictive_std(gp, noisy, tmp_path):
     grid = predict_grid(gp, (40, 100), (-20, 20), 11)
@@ -277,52 +282,6 @@ def test_grid_and_maps_carry_the_predictive_std(gp, noisy, tmp_path):
     train, test = split_runs(noisy, 10, 0)
     paths = render_maps(gp, noisy, (train, test), tmp_path / "maps", n=15)
     names = {p.name for p in paths}
-    assert {f"{m}_std.png" for m in METRICS} <= names and "process_map.svg" in names
-    assert "predictive std" in (tmp_path / "maps" / "process_map.svg").read_text()
-
-
-def monotone(U, omega):
-    """As tests/test_recommend.py: under porosity <= P the best U is (P - 20)/0.2 at omega -20."""
-    U, omega = np.asarray(U, float), np.asarray(omega, float)
-    return {"mass_g": 0.01 + 1e-4 * U, "throughput_mm2_s": 10 + 0.3 * U - 0.1 * omega,
-            "roughness_um": 40 + 0.05 * omega**2, "porosity_pct": 20 + 0.2 * U}
-
-
-@pytest.fixture(scope="module")
-def monotone_gp(tmp_path_factory):
-    df = synthetic_dataset(1, noise=0.02, metrics=monotone)
-    model = GPSurrogate().fit(inputs_of(df), targets_of(df))
-    meta = {"input_range": {"U_mm_s": [40.0, 100.0], "omega_rad_s": [-20.0, 20.0]}}
-    path = tmp_path_factory.mktemp("gp") / "model.joblib"
-    save_surrogate(model, path, meta)
-    return model, meta, path
-
-
-def test_margin_keeps_the_answer_inside_the_limit_by_k_std(monotone_gp):
-    model, meta = monotone_gp[:2]
-    plain = recommend(model, meta, 34.0, margin=0)
-    safe = recommend(model, meta, 34.0, margin=2)
-    assert plain["margin"] == 0 and safe["margin"] == 2 and safe["meets_margin"]
-    assert plain["U_mm_s"] == pytest.approx(70.0, abs=2.0)
-    assert safe["porosity_pct"] + 2 * safe["porosity_pct_std"] <= 34.0
-    assert safe["U_mm_s"] < plain["U_mm_s"]                       # backs off from the limit
-    assert 0 < safe["porosity_pct_std"] < 1.0
-    assert safe["n_feasible"] < plain["n_feasible"] == plain["n_feasible_mean"]
-
-
-def test_a_margin_that_rules_out_everything_is_said(monotone_gp, capsys):
-    model, meta, path = monotone_gp
-    found = recommend(model, meta, 28.3, margin=50)
-    assert found is not None and not found["meets_margin"] and found["n_feasible"] == 0
-    assert main(["--max-porosity", "28.3", "--margin", "50", "--model", str(path)]) == 1
-    out = capsys.readouterr().out
-    assert "none by a margin of 50 predictive std" in out and "lower --margin" in out
-    assert main(["--max-porosity", "34", "--model", str(path)]) == 0
-    out = capsys.readouterr().out
-    assert "mean + 1 predictive std" in out and "Phi = 3" in out and "+- " in out
-
-
-def test_bad_margin_exits_2(monotone_gp, capsys):
-    with pytest.raises(SystemExit) as exit_:
-        main(["--max-porosity", "34", "--margin", "-1", "--model", str(monotone_gp[2])])
-    assert exit_.value.code == 2 and "-1" in capsys.readouterr().err
+    # an uncalibrated model draws no uncertainty maps and no crosses: its std is not an interval
+    assert not any("_interval" in n or "_std" in n for n in names) and "process_map.svg" in names
+    assert "interval" not in (tmp_path / "maps" / "process_map.svg").read_text()

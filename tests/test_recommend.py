@@ -89,6 +89,7 @@ def test_cli_says_when_nothing_qualifies(model_file, capsys):
     (["--max-porosity", "30", "--max-roughness", "-0.5"], "-0.5"),
     (["--max-porosity", "abc"], "abc"),
     (["--max-porosity", "30", "--grid-points", "1"], "1"),
+    (["--max-porosity", "30", "--confidence", "1.2"], "1.2"),
 ])
 def test_cli_bad_input_exits_2_with_one_line(model_file, capsys, argv, named):
     with pytest.raises(SystemExit) as exit_:

@@ -172,13 +172,15 @@ def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
     data.to_csv(tmp_path / "dataset.csv", index=False)
     params = {**fit_params, "grid_points": 11, "models": ["gp"],
               "cv_repeats": 1, "cv_loo": False}
-    write_model_choice(cross_validate_models(data, params), "gp", tmp_path / "choice.csv",
-                       tmp_path / "choice.md")
+    table, held_out = cross_validate_models(data, params, return_predictions=True)
+    write_model_choice(table, "gp", tmp_path / "choice.csv", tmp_path / "choice.md",
+                       predictions=held_out, predictions_path=tmp_path / "cv.csv")
     out = {name: str(tmp_path / "surrogate" / file) for name, file in
            (("model", "model.joblib"), ("scores", "scores.json"), ("split", "split.csv"),
             ("grid", "grid.csv"))}
     smk = fake_snakemake({"dataset": str(tmp_path / "dataset.csv"),
-                          "choice": str(tmp_path / "choice.csv")}, out,
+                          "choice": str(tmp_path / "choice.csv"),
+                          "predictions": str(tmp_path / "cv.csv")}, out,
                          {"surrogate": params, "grid_points": 11})
     runpy.run_path(str(smk.scriptdir / "fit_surrogate.py"), init_globals={"snakemake": smk})
 
@@ -192,8 +194,13 @@ def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
     grid = pd.read_csv(out["grid"])
     assert len(grid) == 121 and grid["throughput_index"].max() == pytest.approx(1.0)
     assert (grid[[f"{m}_std" for m in METRICS]] > 0).all().all()
+    for q in (*METRICS, "throughput_index", "defect_index"):      # calibrated intervals around the mean
+        assert (grid[f"{q}_lo"] < grid[f"{q}_mean_lo"]).all() and (grid[f"{q}_mean_lo"] <= grid[q]).all()
+        assert (grid[q] <= grid[f"{q}_mean_hi"]).all() and (grid[f"{q}_mean_hi"] < grid[f"{q}_hi"]).all()
     model, meta = load_surrogate(out["model"])
-    assert isinstance(model, GPSurrogate) and meta["model"]["name"] == "gp"
+    assert isinstance(model.model, GPSurrogate) and meta["model"]["name"] == "gp"
+    assert meta["model"]["intervals"]["confidence"] == params["confidence"]
+    assert "cross-conformal" in meta["model"]["intervals"]["method"]
     assert meta["split"]["test"] == split.index[split["set"] == "test"].tolist()
     log = (tmp_path / "rule.log").read_text()
     assert "converged" in log and "chosen by cross-validation: gp" in log

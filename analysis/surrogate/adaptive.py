@@ -62,7 +62,9 @@ from analysis.io import USER_ERRORS, atomic_path, error_line
 from analysis.metrics.dataset import INPUTS, METRICS
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, targets_of
+from analysis.surrogate.intervals import calibrated_from_predictions, relative_noise
 from analysis.surrogate.persistence import save_surrogate
+from analysis.surrogate.selection import cross_validate_models
 
 ROOT = PROJECT_DIR
 
@@ -474,8 +476,13 @@ class WorkflowEvaluator:
         return data
 
 
-def write_result(result, outdir, level, extra_meta=None):
-    """Write design.csv, rounds.csv, dataset.csv and model.joblib of a run into ``outdir``."""
+def write_result(result, outdir, level, extra_meta=None, surrogate_params=None):
+    """Write design.csv, rounds.csv, dataset.csv and model.joblib of a run into ``outdir``.
+
+    With ``surrogate_params`` (config's ``surrogate:``) the GP is saved with its intervals
+    calibrated on its grouped k-fold held-out predictions over the design's runs
+    (:mod:`analysis.surrogate.intervals`), so ``spreadmap-recommend`` can use them.
+    """
     outdir = Path(outdir)
     for name, frame in (("design", result.design), ("rounds", result.rounds),
                         ("dataset", result.data)):
@@ -489,7 +496,15 @@ def write_result(result, outdir, level, extra_meta=None):
             "model": {"name": "gp", "length_scale": result.model.length_scales_.tolist(),
                       "noise_std": result.model.noise_std_.tolist()},
             **(extra_meta or {})}
-    save_surrogate(result.model, outdir / "model.joblib", meta)
+    model = result.model
+    if surrogate_params is not None:
+        params = {**surrogate_params, "models": ["gp"], "cv_loo": False}
+        _, held_out = cross_validate_models(result.data, params, return_predictions=True)
+        rho, source = relative_noise(result.data, random_state=int(params["random_state"]))
+        model = calibrated_from_predictions(model, held_out[held_out.scheme == "kfold"], result.data, rho,
+                                            params["confidence"], source)
+        meta["model"]["intervals"] = model.summary()
+    save_surrogate(model, outdir / "model.joblib", meta)
 
 
 def main(argv=None):
@@ -533,7 +548,7 @@ def main(argv=None):
     try:
         result = run_adaptive(evaluator, bounds, settings, replicates=replicates,
                               log=lambda line: print(line, flush=True))
-        write_result(result, outdir, level)
+        write_result(result, outdir, level, surrogate_params=config["surrogate"])
     except USER_ERRORS as err:
         print(f"{parser.prog}: error: {error_line(err)}", file=sys.stderr)
         return 1

@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.metrics.dataset import METRICS
+from analysis.surrogate.intervals import PRODUCTS, interval_frame
 
 
 def metric_maxima(frame):
@@ -81,12 +82,14 @@ def predict_with_std(model, U, omega):
     return np.asarray(mean, float), np.asarray(std, float)
 
 
-def predict_frame(model, U, omega):
+def predict_frame(model, U, omega, confidence=None):
     """Predict the metrics at the speeds ``U`` [mm/s] and ``omega`` [rad/s] (1-D, same length).
 
     Returns a frame of the speeds and the four metrics; when the model gives a
     predictive standard deviation (:func:`provides_std`), also
-    ``<metric>_std`` columns in the metric's unit.
+    ``<metric>_std`` columns in the metric's unit; when it gives calibrated intervals
+    (:func:`provides_intervals`), their columns (:func:`analysis.surrogate.intervals.interval_frame`)
+    at ``confidence`` (default: the model's level).
     """
     U, omega = np.asarray(U, float), np.asarray(omega, float)
     frame = pd.DataFrame({"U_mm_s": U, "omega_rad_s": omega})
@@ -99,7 +102,14 @@ def predict_frame(model, U, omega):
     if std is not None:
         for j, m in enumerate(METRICS):
             frame[f"{m}_std"] = std[:, j]
+    if provides_intervals(model):
+        frame = pd.concat([frame, interval_frame(model, np.c_[U, omega], confidence)], axis=1)
     return frame
+
+
+def provides_intervals(model):
+    """True if ``model`` gives calibrated intervals (:class:`analysis.surrogate.intervals.CalibratedSurrogate`)."""
+    return callable(getattr(model, "predict_interval", None))
 
 
 def hybrid_index_std(frame, maxima):
@@ -117,7 +127,7 @@ def hybrid_index_std(frame, maxima):
     return (product_std("throughput_mm2_s", "mass_g"), product_std("roughness_um", "porosity_pct"))
 
 
-def predict_grid(model, U_range, omega_range, n):
+def predict_grid(model, U_range, omega_range, n, confidence=None):
     """Evaluate the surrogate on a regular n x n grid of spreader speeds.
 
     Parameters
@@ -130,6 +140,8 @@ def predict_grid(model, U_range, omega_range, n):
         Roller angular speed limits, rad/s.
     n : int
         Grid points per axis (>= 2).
+    confidence : float, optional
+        Coverage level of the intervals (default: the model's, config ``surrogate.confidence``).
 
     Returns
     -------
@@ -139,15 +151,35 @@ def predict_grid(model, U_range, omega_range, n):
         ``defect_index`` (:func:`hybrid_indices`, maxima over this grid).  When
         the model gives a predictive standard deviation, also
         ``<metric>_std`` (metric units) and ``throughput_index_std``,
-        ``defect_index_std`` (:func:`hybrid_index_std`).
+        ``defect_index_std`` (:func:`hybrid_index_std`).  When it gives calibrated
+        intervals (:func:`provides_intervals`), also ``<q>_lo``, ``<q>_hi`` (single-run
+        interval) and ``<q>_mean_lo``, ``<q>_mean_hi`` (interval of the mean) of the
+        metrics, of the products and of the two indices (:func:`index_intervals`), at the
+        model's confidence level.
     """
     if int(n) < 2:
         raise ValueError(f"grid needs at least 2 points per axis, got {n}")
     U, omega = np.meshgrid(np.linspace(*U_range, int(n)), np.linspace(*omega_range, int(n)),
                            indexing="ij")
-    grid = predict_frame(model, U.ravel(), omega.ravel())
+    grid = predict_frame(model, U.ravel(), omega.ravel(), confidence)
     maxima = metric_maxima(grid)
     grid["throughput_index"], grid["defect_index"] = hybrid_indices(grid, maxima)
     if provides_std(model):
         grid["throughput_index_std"], grid["defect_index_std"] = hybrid_index_std(grid, maxima)
+    if provides_intervals(model):
+        index_intervals(grid, maxima)
     return grid
+
+
+def index_intervals(frame, maxima):
+    """Add the hybrid indices' intervals to a frame with the products' interval columns, in place.
+
+    An index is its product (``throughput_product`` = Q_s M_s, ``defect_product`` =
+    R_q Phi) over the product of the maxima, so its interval is the product's over the
+    same constant: ``throughput_index_lo``, ``_hi``, ``_mean_lo``, ``_mean_hi``, and the
+    same for ``defect_index`` (dimensionless).
+    """
+    for index, (product, (a, b)) in zip(("throughput_index", "defect_index"), PRODUCTS.items()):
+        for end in ("lo", "hi", "mean_lo", "mean_hi"):
+            frame[f"{index}_{end}"] = frame[f"{product}_{end}"] / (maxima[a] * maxima[b])
+    return frame

@@ -35,24 +35,94 @@ import time
 import numpy as np
 import pandas as pd
 from joblib import Parallel, delayed
+from scipy.stats import norm
 
 from analysis.io import atomic_path
 from analysis.metrics.dataset import METRICS, point_groups
 from analysis.surrogate.candidates import CANDIDATES, GPSurrogate, make_candidate
 from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, targets_of
+from analysis.surrogate.intervals import (
+    calibrate,
+    check_confidence,
+    conformal_quantile,
+    interval_score,
+    relative_noise,
+    with_products,
+)
 from analysis.surrogate.network import _convergence_messages
 from analysis.surrogate.scores import _num, regression_scores
 
 
 def _fold(name, p, X, Y, train, test):
-    """Fit a fresh ``name`` candidate on one fold: (test rows, their predictions, ConvergenceWarnings, fit s)."""
+    """Fit a fresh ``name`` candidate on one fold.
+
+    Returns (test rows, their predictions and std, ConvergenceWarnings, fit s).
+    """
     t0 = time.perf_counter()
     with _convergence_messages() as messages:
         model = make_candidate(name, p).fit(X[train], Y[train])
-    return test, model.predict(X[test]), len(messages), time.perf_counter() - t0
+    mean, std = model.predict(X[test], return_std=True)
+    return test, mean, std, len(messages), time.perf_counter() - t0
 
 
-def cross_validate_models(df, params, log=None, n_jobs=1):
+def interval_scores(Y, preds, stds, repeats, rho, confidence):
+    """Coverage, width and interval score of calibrated and of raw intervals, cross-fitted.
+
+    Each fold's held-out runs get the interval calibrated (:func:`analysis.surrogate.intervals.calibrate`)
+    on the held-out predictions of the *other* runs, pooled over all repeats, so no run
+    calibrates its own interval.
+
+    Parameters
+    ----------
+    Y : numpy.ndarray, shape (n, 4)
+        The runs' metrics.
+    preds, stds : list of numpy.ndarray, shape (n, 4)
+        Held-out predictions and the models' std, one per repeat.
+    repeats : list of list of (train, test)
+        The folds of each repeat.
+    rho : numpy.ndarray, shape (6,)
+        Relative run-to-run noise (:func:`analysis.surrogate.intervals.relative_noise`).
+    confidence : float
+        Coverage level of the intervals.
+
+    Returns
+    -------
+    dict of numpy.ndarray, shape (4,)
+        Per metric: ``coverage_pct`` (held-out runs inside their calibrated single-run
+        interval), ``width_pct`` and ``interval_score_pct`` (its mean width and interval
+        score, in % of the mean |metric|), ``std_coverage_pct`` (runs inside
+        mean +- z std of the model's own std, z the normal quantile of the level: what
+        the maps showed before calibration).
+    """
+    k = Y.shape[1]
+    y = with_products(Y)
+    n = len(Y)
+    P = np.stack([with_products(m, s)[0] for m, s in zip(preds, stds)])   # (R, n, 6)
+    S = np.stack([with_products(m, s)[1] for m, s in zip(preds, stds)])
+    inside = np.zeros((len(preds), n, k), bool)
+    width = np.zeros((len(preds), n, k))
+    score = np.zeros((len(preds), n, k))
+    for r, folds in enumerate(repeats):
+        for _, test in folds:
+            keep = np.ones(n, bool)
+            keep[test] = False
+            c, scores = calibrate(np.tile(y[keep], (len(preds), 1)), P[:, keep].reshape(-1, 6),
+                                  S[:, keep].reshape(-1, 6), rho)
+            q = conformal_quantile(scores, confidence, keep.sum())
+            half = q * np.hypot(c * S[r, test], rho * P[r, test])
+            lo, hi = P[r, test] - half, P[r, test] + half
+            inside[r, test] = ((y[test] >= lo) & (y[test] <= hi))[:, :k]
+            width[r, test] = (hi - lo)[:, :k]
+            score[r, test] = interval_score(y[test], lo, hi, confidence)[:, :k]
+    z = norm.ppf(0.5 + confidence / 2)
+    raw = np.abs(np.stack(preds) - Y) <= z * np.stack(stds)
+    scale = np.abs(Y).mean(axis=0) / 100
+    return {"coverage_pct": 100 * inside.mean(axis=(0, 1)), "width_pct": width.mean(axis=(0, 1)) / scale,
+            "interval_score_pct": score.mean(axis=(0, 1)) / scale,
+            "std_coverage_pct": 100 * raw.mean(axis=(0, 1))}
+
+
+def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=False):
     """Score every candidate of ``params["models"]`` by grouped cross-validation.
 
     Schemes: ``kfold``: ``cv_folds``-fold over the (U, omega) points, repeated
@@ -60,7 +130,8 @@ def cross_validate_models(df, params, log=None, n_jobs=1):
     pooled out-of-fold predictions are scored (:func:`regression_scores`) and
     the scores averaged over repeats (``*_sd``: their spread).  ``loo``
     (when ``cv_loo``): leave one (U, omega) point out, all its replicates
-    together, pooled.
+    together, pooled.  Each scheme also scores the candidate's intervals at
+    ``confidence`` (:func:`interval_scores`): calibrated, cross-fitted, and its own std.
 
     Parameters
     ----------
@@ -68,23 +139,32 @@ def cross_validate_models(df, params, log=None, n_jobs=1):
         The runs (speeds and metrics, finite).
     params : dict
         The ``surrogate:`` section (``models``, ``cv_folds``, ``cv_repeats``,
-        ``cv_loo``, ``split_seed`` and the models' own keys).
+        ``cv_loo``, ``split_seed``, ``confidence`` and the models' own keys).
     log : callable, optional
         Called with a progress line per model and scheme.
     n_jobs : int
         Folds fitted at once (joblib processes); the scores do not depend on it.
+    return_predictions : bool
+        Also return the held-out predictions.
 
     Returns
     -------
-    pandas.DataFrame
+    table : pandas.DataFrame
         One row per (model, scheme, metric): ``model``, ``scheme``,
         ``metric``, ``symbol``, ``R``, ``R2``, ``MAPE_pct``, ``R_sd``,
-        ``R2_sd``, ``MAPE_pct_sd``, ``n_splits`` (folds x repeats, or points),
+        ``R2_sd``, ``MAPE_pct_sd``, the columns of :func:`interval_scores`,
+        ``n_splits`` (folds x repeats, or points),
         ``fit_s`` (the scheme's fits, summed over its folds), ``convergence_warnings``.
+    predictions : pandas.DataFrame
+        Only with ``return_predictions``: one row per (model, scheme, repeat, run):
+        ``row`` (position in df), U_mm_s, omega_rad_s, the held-out prediction of each
+        metric and its ``<metric>_std`` (the fold model's std of its mean).
     """
     p = params
     _check_dataset(df)
     X, Y = inputs_of(df), targets_of(df)
+    confidence = check_confidence(p["confidence"])
+    rho, _ = relative_noise(df, random_state=int(p["random_state"]))
     n_points = int(point_groups(df).max()) + 1
     schemes = [("kfold", [point_folds(df, p["cv_folds"], int(p["split_seed"]) + r)
                           for r in range(int(p["cv_repeats"]))])]
@@ -94,34 +174,80 @@ def cross_validate_models(df, params, log=None, n_jobs=1):
              for r, splits in enumerate(repeats) for train, test in splits]
     folds = Parallel(n_jobs=n_jobs)(delayed(_fold)(name, p, X, Y, train, test)
                                     for name, _, _, train, test in tasks)
-    rows = []
+    rows, held_out = [], []
     for name in p["models"]:
         for scheme, repeats in schemes:
             preds = {r: np.full_like(Y, np.nan) for r in range(len(repeats))}
+            stds = {r: np.full_like(Y, np.nan) for r in range(len(repeats))}
             warned, elapsed = 0, 0.0
-            for (n, sc, r, _, _), (test, fold_pred, n_warn, fit_s) in zip(tasks, folds):
+            for (n, sc, r, _, _), (test, fold_pred, fold_std, n_warn, fit_s) in zip(tasks, folds):
                 if (n, sc) == (name, scheme):
                     preds[r][test] = fold_pred
+                    stds[r][test] = fold_std
                     warned += n_warn
                     elapsed += fit_s
             scores = [regression_scores(Y, pred) for pred in preds.values()]
-            for m, (symbol, _) in METRICS.items():
+            covered = interval_scores(Y, list(preds.values()), list(stds.values()), repeats, rho, confidence)
+            for j, (m, (symbol, _)) in enumerate(METRICS.items()):
                 values = {k: np.array([np.nan if s[m][k] is None else s[m][k] for s in scores])
                           for k in ("R", "R2", "MAPE_pct")}
                 rows.append({"model": name, "scheme": scheme, "metric": m, "symbol": symbol,
                              **{k: float(np.mean(v)) for k, v in values.items()},
                              **{f"{k}_sd": float(np.std(v)) for k, v in values.items()},
+                             **{k: float(v[j]) for k, v in covered.items()},
                              "n_splits": sum(len(s) for s in repeats),
                              "fit_s": round(elapsed, 2), "convergence_warnings": warned})
+            for r in preds:
+                frame = pd.DataFrame(np.c_[preds[r], stds[r]],
+                                     columns=[*METRICS, *(f"{m}_std" for m in METRICS)])
+                frame.insert(0, "row", np.arange(len(df)))
+                frame.insert(0, "repeat", r)
+                frame.insert(0, "scheme", scheme)
+                frame.insert(0, "model", name)
+                frame.insert(4, "U_mm_s", X[:, 0])
+                frame.insert(5, "omega_rad_s", X[:, 1])
+                held_out.append(frame)
             if log:
-                r2 = np.mean([r["R2"] for r in rows[-len(METRICS):]])
-                log(f"{name:>5} {scheme:>5}: mean R^2 {r2:.3f} over the metrics "
+                block = rows[-len(METRICS):]
+                log(f"{name:>5} {scheme:>5}: mean R^2 {np.mean([b['R2'] for b in block]):.3f}, "
+                    f"{100 * confidence:g} % interval covers {np.mean([b['coverage_pct'] for b in block]):.1f} % "
                     f"({sum(len(s) for s in repeats)} fits, {elapsed:.1f} s)")
-    return pd.DataFrame(rows)
+    table = pd.DataFrame(rows)
+    if return_predictions:
+        return table, pd.concat(held_out, ignore_index=True)
+    return table
 
 
-def choose_model(table, order=None):
-    """The candidate with the highest mean k-fold R^2 over the metrics; ties: first in ``order``.
+def min_coverage_pct(params):
+    """The least k-fold coverage (%) a candidate's intervals may have: ``100 confidence -
+    coverage_tolerance_pct`` of the ``surrogate:`` section."""
+    return 100 * check_confidence(params["confidence"]) - float(params["coverage_tolerance_pct"])
+
+
+def under_covering(table, min_coverage):
+    """Models whose calibrated k-fold intervals cover less than ``min_coverage`` (%) of the
+    held-out runs for at least one metric, as {model: [symbols of those metrics]}."""
+    if min_coverage is None or "coverage_pct" not in table:
+        return {}
+    kfold = table[table["scheme"] == "kfold"]
+    low = kfold[kfold["coverage_pct"] < min_coverage]
+    return {m: block["symbol"].tolist() for m, block in low.groupby("model", sort=False)}
+
+
+def choose_model(table, order=None, min_coverage=None):
+    """The candidate with the highest mean k-fold R^2 over the metrics among those whose
+    intervals do not under-cover; ties: first in ``order``.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        :func:`cross_validate_models`' table.
+    order : list of str, optional
+        Candidates in config order (ties go to the first).
+    min_coverage : float, optional
+        Least k-fold coverage (%) of the calibrated intervals, for every metric
+        (:func:`min_coverage_pct`); a candidate below it is passed over unless all are.
+        None: R^2 alone.
 
     Returns
     -------
@@ -134,33 +260,53 @@ def choose_model(table, order=None):
     order = list(order or mean_r2.index)
     rank = pd.Series({m: mean_r2[m] for m in order if m in mean_r2.index})
     rank = rank.fillna(-np.inf)
-    best = max(rank.index, key=lambda m: (rank[m], -order.index(m)))
+    low = under_covering(table, min_coverage)
+    eligible = [m for m in rank.index if m not in low] or list(rank.index)
+    best = max(eligible, key=lambda m: (rank[m], -order.index(m)))
     return best, rank.sort_values(ascending=False, kind="stable")
 
 
-def model_choice_markdown(table, chosen, ceiling=None, level=None):
+def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=None, min_coverage=None):
     """The cross-validation table as Markdown, the chosen model in bold, the noise ceiling beside it.
 
-    ``ceiling`` is :func:`analysis.metrics.noise_floor.accuracy_ceiling` (or None).
+    ``ceiling`` is :func:`analysis.metrics.noise_floor.accuracy_ceiling` (or None);
+    ``confidence`` the intervals' level and ``min_coverage`` (%) the choice's least
+    coverage (:func:`choose_model`), for the intervals' table and the flags.
     """
     symbols = [s for s, _ in METRICS.values()]
     title = "# Surrogate model choice by cross-validation" + (f" ({level})" if level else "")
     head = ["model", "scheme", f"R: {' / '.join(symbols)}", f"R^2: {' / '.join(symbols)}",
             f"MAPE %: {' / '.join(symbols)}", "mean R^2", "fits", "s"]
+    low = under_covering(table, min_coverage)
+    rule = "the highest repeated k-fold R^2 averaged over the four metrics"
+    if min_coverage is not None:
+        rule += (f" among the candidates whose calibrated {100 * confidence:g} % intervals cover at least "
+                 f"{min_coverage:g} % of the held-out runs of every metric (k-fold)")
+        if chosen in low:
+            rule += "; **every candidate under-covers**, so the best R^2 is taken regardless"
     lines = [title, "",
-             f"Chosen: **{chosen}** ({CANDIDATES.get(chosen, chosen)}): the highest repeated "
-             "k-fold R^2 averaged over the four metrics. Folds are (U, omega) points: the "
-             "replicates of a point are left out together.", ""]
+             f"Chosen: **{chosen}** ({CANDIDATES.get(chosen, chosen)}): {rule}. Folds are (U, omega) "
+             "points: the replicates of a point are left out together.", ""]
 
     def joined(values, f):
         return " / ".join("n/a" if not np.isfinite(v) else format(v, f) for v in values)
 
-    rows = []
+    def bold(model):
+        return f"**{model}**" if model == chosen else model
+
+    rows, intervals = [], []
     for (model, scheme), block in table.groupby(["model", "scheme"], sort=False):
         block = block.set_index("metric").loc[list(METRICS)]
-        rows.append([f"**{model}**" if model == chosen else model, scheme, joined(block["R"], ".3f"),
+        rows.append([bold(model), scheme, joined(block["R"], ".3f"),
                      joined(block["R2"], ".3f"), joined(block["MAPE_pct"], ".1f"), f"{block['R2'].mean():.3f}",
                      str(int(block["n_splits"].iloc[0])), f"{block['fit_s'].iloc[0]:.1f}"])
+        if "coverage_pct" in block:
+            flag = ("under-covers " + ", ".join(low[model])) if scheme == "kfold" and model in low else ""
+            intervals.append([bold(model), scheme, joined(block["coverage_pct"], ".0f"),
+                              f"{block['coverage_pct'].mean():.1f}", joined(block["width_pct"], ".1f"),
+                              joined(block["interval_score_pct"], ".1f"),
+                              f"{block['interval_score_pct'].mean():.1f}",
+                              joined(block["std_coverage_pct"], ".0f"), flag])
     if ceiling:
         c = [ceiling[m] for m in METRICS]
         rows.append(["*noise ceiling*", "replicates", joined([x["R_max"] for x in c], ".3f"),
@@ -175,15 +321,39 @@ def model_choice_markdown(table, chosen, ceiling=None, level=None):
     else:
         lines += ["", "One run per point: the noise ceiling is not measured "
                   "(set `sweep.replicates` >= 2)."]
+    if intervals and confidence is not None:
+        level_pct = f"{100 * confidence:g} %"
+        ihead = ["model", "scheme", f"covers %: {' / '.join(symbols)}", "mean covers %",
+                 f"width %: {' / '.join(symbols)}", f"interval score %: {' / '.join(symbols)}",
+                 "mean interval score %", f"own std covers %: {' / '.join(symbols)}", "flag"]
+        lines += ["", f"## Intervals: {level_pct} single-run prediction intervals on the held-out runs", "",
+                  pd.DataFrame(intervals, columns=ihead).to_markdown(
+                      index=False, colalign=["left", "left", "left", "right", "left", "left", "right", "left", "left"]),
+                  "", f"*covers*: share of held-out runs inside their calibrated {level_pct} single-run "
+                  "interval (grouped cross-conformal, analysis.surrogate.intervals; each fold's interval "
+                  "calibrated on the other runs' held-out residuals); *width* and *interval score* "
+                  "(Gneiting & Raftery: width + 2/alpha x each miss; lower is better) in % of the "
+                  f"mean metric; *own std covers*: runs inside mean +- {norm.ppf(0.5 + confidence / 2):.3g} x "
+                  "the model's own predictive std, uncalibrated (what the maps showed before). *n/a* width: "
+                  "too few held-out runs for a finite interval at this level (at least confidence/(1 - "
+                  "confidence) are needed)."
+                  + ("" if min_coverage is None else
+                     f" A candidate whose calibrated k-fold coverage is below {min_coverage:g} % for a "
+                     "metric is flagged and not chosen while another is not.")]
     return "\n".join(lines) + "\n"
 
 
-def write_model_choice(table, chosen, csv_path, md_path, ceiling=None, level=None):
-    """Write the cross-validation table as CSV (with a ``chosen`` column) and Markdown, atomically."""
+def write_model_choice(table, chosen, csv_path, md_path, ceiling=None, level=None, confidence=None,
+                       min_coverage=None, predictions=None, predictions_path=None):
+    """Write the cross-validation table as CSV (with a ``chosen`` column) and Markdown, atomically;
+    with ``predictions`` also the held-out predictions as CSV (``predictions_path``)."""
     with atomic_path(csv_path) as tmp:
         table.assign(chosen=table["model"] == chosen).to_csv(tmp, index=False)
     with atomic_path(md_path) as tmp:
-        tmp.write_text(model_choice_markdown(table, chosen, ceiling, level))
+        tmp.write_text(model_choice_markdown(table, chosen, ceiling, level, confidence, min_coverage))
+    if predictions is not None:
+        with atomic_path(predictions_path) as tmp:
+            predictions.to_csv(tmp, index=False)
 
 
 def read_choice(csv_path):
@@ -254,7 +424,8 @@ def chosen_summary(model, info, df, split, table):
     _, ranking = choose_model(table)
     return {**info,
             "fitted_on": "the training points of the paper-style split (test points unseen)",
-            "predictive_std": "std of the predicted mean: " + {
+            "predictive_std": "std of the predicted mean (grid.csv *_std; with calibrated intervals "
+                              "inflated by their std_inflation c): " + {
                 "gp": "Gaussian-process posterior (noise term excluded)",
                 "mlp": "spread of the ensemble's networks",
                 "trees": "spread of the trees"}[info["name"]],

@@ -10,14 +10,16 @@ surrogate).  Figures are drawn on matplotlib's Agg canvas (pyplot is never
 imported, so no display is needed) and written as PNG and SVG.
 
 Beyond the paper: with replicates the points drawn are the replicate means
-(with their seed-to-seed range), and when the surrogate gives a predictive
-standard deviation (:func:`analysis.surrogate.predict.provides_std`) each regressed
-surface gets a companion map of it (``<metric>_std``) and the process map
-draws +-1 std crosses along its iso-lines.
+(with their seed-to-seed range), and when the surrogate gives calibrated
+intervals (:func:`analysis.surrogate.predict.provides_intervals`) each regressed
+surface gets a companion map of the half-width of its single-run interval
+(``<metric>_interval``) and the process map draws the indices' single-run
+intervals as crosses along its iso-lines, the coverage level in each caption.
 """
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -29,12 +31,12 @@ from analysis.io import atomic_path
 from analysis.metrics.dataset import INPUTS, METRICS, point_means
 from analysis.surrogate.data import inputs_of
 from analysis.surrogate.predict import (
-    hybrid_index_std,
     hybrid_indices,
+    index_intervals,
     metric_maxima,
     predict_frame,
     predict_grid,
-    provides_std,
+    provides_intervals,
 )
 from analysis.surrogate.scores import pearson_r
 
@@ -152,13 +154,14 @@ def _replicate_ranges(ax, points, metric):
         ax.plot([w, w], [u, u], [lo, hi], color="0.3", lw=1)
 
 
-def std_figure(model, df, split, metric, n=41):
-    """Companion of the regressed surface: the surrogate's predictive std of one metric.
+def interval_figure(model, df, split, metric, n=41):
+    """Companion of the regressed surface: the half-width of the calibrated single-run interval.
 
     Parameters
     ----------
     model : estimator
-        Fitted surrogate with a predictive standard deviation.
+        Fitted surrogate with calibrated intervals
+        (:func:`analysis.surrogate.predict.provides_intervals`).
     df : pandas.DataFrame
         The simulated points (replicate means), for the range and the markers.
     split : (array of int, array of int)
@@ -171,25 +174,48 @@ def std_figure(model, df, split, metric, n=41):
     Returns
     -------
     matplotlib.figure.Figure
-        Filled contours of the std (metric units) over (omega, U), the
-        training (blue) and test (black) points on top.
+        Filled contours over (omega, U) of half the width of the interval a single
+        new run falls in at the model's confidence (metric units), the training
+        (blue) and test (black) points on top; the caption names the level and method.
     """
     X = inputs_of(df)
     grid = predict_grid(model, (X[:, 0].min(), X[:, 0].max()), (X[:, 1].min(), X[:, 1].max()), n)
-    U, omega, S = (grid[c].to_numpy().reshape(n, n) for c in ("U_mm_s", "omega_rad_s",
-                                                               f"{metric}_std"))
-    fig = _figure(figsize=(7.5, 5.8), layout="constrained")
+    U, omega = (grid[c].to_numpy().reshape(n, n) for c in ("U_mm_s", "omega_rad_s"))
+    half = ((grid[f"{metric}_hi"] - grid[f"{metric}_lo"]) / 2).to_numpy().reshape(n, n)
+    level = _level(model)
+    fig = _figure(figsize=(7.5, 6.2), layout="constrained")
     ax = fig.add_subplot()
-    filled = ax.contourf(omega, U, S, levels=14, cmap="viridis")
+    if not np.isfinite(half).all():        # too few calibration runs for this level
+        ax.text(0.5, 0.5, _too_few(model), ha="center", va="center", transform=ax.transAxes, wrap=True)
+        ax.set(xlabel=LABELS["omega_rad_s"], ylabel=LABELS["U_mm_s"], title=f"{TITLES[metric]}: no {level} interval")
+        return fig
+    filled = ax.contourf(omega, U, half, levels=14, cmap="viridis")
     for rows, colour, marker, label in ((split[0], _TRAIN, "o", "training runs"),
                                         (split[1], _TEST, "s", "test runs")):
         ax.scatter(X[rows, 1], X[rows, 0], color=colour, edgecolor="white", marker=marker,
                    s=30, label=f"{label} ({len(rows)})")
     ax.set(xlabel=LABELS["omega_rad_s"], ylabel=LABELS["U_mm_s"],
-           title=f"{TITLES[metric]}: surrogate uncertainty")
-    fig.colorbar(filled, ax=ax, label=f"predictive std of {LABELS[metric]}")
+           title=f"{TITLES[metric]}: {level} single-run interval")
+    fig.colorbar(filled, ax=ax, label=f"half-width of the {level} interval of {LABELS[metric]}")
     ax.legend(loc="upper left", fontsize=8, framealpha=0.8)
+    _caption(fig, f"{level} of new DEM runs fall within the prediction +- this (calibrated by grouped "
+             "cross-conformal prediction on held-out runs; run-to-run noise included)")
     return fig
+
+
+def _caption(fig, text, width=95):
+    """A small caption under the axes, wrapped; the constrained layout makes room for it."""
+    fig.supxlabel(textwrap.fill(text, width, break_on_hyphens=False), fontsize=8, ha="center")
+
+
+def _too_few(model):
+    return (f"{model.n_runs} held-out runs calibrate no finite {_level(model)} interval "
+            f"(at least {model.runs_needed()} needed)")
+
+
+def _level(model):
+    """The model's interval coverage as text, e.g. '90 %'."""
+    return f"{100 * model.confidence:g} %"
 
 
 def parity_figure(df, predicted, split, metric):
@@ -303,9 +329,9 @@ def process_map_figure(model, df, split, n=101):
                                         (omega_values.min(), omega_values.max()), n))
     lines = process_map_lines(model, U_values, omega_values, maxima, n)
     runs_t, runs_d = hybrid_indices(df, maxima)
-    with_std = provides_std(model)
-    if with_std:
-        lines["throughput_index_std"], lines["defect_index_std"] = hybrid_index_std(lines, maxima)
+    with_intervals = provides_intervals(model) and model.is_finite()
+    if with_intervals:
+        index_intervals(lines, maxima)
 
     fig = _figure(figsize=(8.0, 6.5), layout="constrained")
     ax = fig.add_subplot()
@@ -321,13 +347,14 @@ def process_map_figure(model, df, split, n=101):
         ax.plot(line["throughput_index"], line["defect_index"], color=colour, lw=1.2,
                 label=None if family in labelled else legend)
         labelled.add(family)
-        if with_std:           # +-1 predictive std crosses at every 10th point of the line
+        if with_intervals:     # single-run interval crosses at every 10th point of the line
             every = line.iloc[::10]
-            ax.errorbar(every["throughput_index"], every["defect_index"],
-                        xerr=every["throughput_index_std"], yerr=every["defect_index_std"],
+            t, d = every["throughput_index"], every["defect_index"]
+            ax.errorbar(t, d, xerr=[t - every["throughput_index_lo"], every["throughput_index_hi"] - t],
+                        yerr=[d - every["defect_index_lo"], every["defect_index_hi"] - d],
                         fmt="none", ecolor=colour, alpha=0.35, lw=1,
-                        label=None if "std" in labelled else "±1 predictive std")
-            labelled.add("std")
+                        label=None if "interval" in labelled else f"{_level(model)} single-run interval")
+            labelled.add("interval")
         end = line.loc[(sign * line[along]).idxmax()]
         ax.annotate(fmt.format(value), (end["throughput_index"], end["defect_index"]),
                     textcoords="offset points", color=colour, fontsize=8, **place)
@@ -345,6 +372,11 @@ def process_map_figure(model, df, split, n=101):
     ax.set_title("Spreading process map")
     ax.legend(loc="best", fontsize=9)
     ax.grid(alpha=0.3)
+    if with_intervals:
+        _caption(fig, f"Crosses: the {_level(model)} interval of the indices of a single new run "
+                 "(calibrated by grouped cross-conformal prediction on held-out runs; run-to-run noise included)")
+    elif provides_intervals(model):
+        _caption(fig, f"No interval crosses: {_too_few(model)}")
     return fig
 
 
@@ -370,7 +402,7 @@ def render_maps(model, df, split, outdir, n=41):
     -------
     list of pathlib.Path
         ``<metric>_surface.{png,svg}``, ``<metric>_parity.{png,svg}`` and,
-        when the model gives a predictive std, ``<metric>_std.{png,svg}`` per
+        when the model gives calibrated intervals, ``<metric>_interval.{png,svg}`` per
         metric (metric = dataset column, e.g. ``mass_g``), then
         ``process_map.{png,svg}``.
     """
@@ -385,9 +417,9 @@ def render_maps(model, df, split, outdir, n=41):
                                  f"{metric}_surface")
             paths += save_figure(parity_figure(points, predicted, split, metric), outdir,
                                  f"{metric}_parity")
-            if provides_std(model):
-                paths += save_figure(std_figure(model, points, split, metric, n), outdir,
-                                     f"{metric}_std")
+            if provides_intervals(model):
+                paths += save_figure(interval_figure(model, points, split, metric, n), outdir,
+                                     f"{metric}_interval")
         paths += save_figure(process_map_figure(model, points, split, max(n, 101)), outdir,
                              "process_map")
     return paths

@@ -1,0 +1,353 @@
+"""Calibrated prediction intervals: normalised cross-conformal prediction grouped by (U, omega) point.
+
+Every candidate surrogate (:mod:`analysis.surrogate.candidates`) gives a mean and its
+own predictive standard deviation ``s(x)`` of that mean: the GP's posterior, the
+spread of the networks or of the trees.  That std is not a prediction interval:
+it leaves out the run-to-run noise and, for the ensembles, is not calibrated at
+all (the networks of the mlp ensemble agree far more than they are right).  Here
+each candidate's intervals are calibrated on its own cross-validated residuals
+(the k-fold cross-validation of model choice, folds grouped by (U, omega) point,
+so a held-out run's point was never seen by the model that predicts it):
+
+1. **Scale.**  The predictive scale of a single run is
+   ``sigma(x) = sqrt((c s(x))^2 + (rho mu(x))^2)``: the model's std, inflated by a
+   factor ``c``, and the run-to-run noise, ``rho`` times the predicted metric
+   (the noise floor is relative: :mod:`analysis.metrics.noise_floor`).  ``rho``
+   is the pooled relative seed-to-seed sd when the dataset has replicates, else
+   the Gaussian process's white-noise term over the mean metric
+   (:func:`relative_noise`); ``c`` makes the mean squared cross-validated
+   residual equal the mean ``sigma^2`` (:func:`calibrate`).
+2. **Conformal step.**  The scores ``|y - mu_cv(x)| / sigma_cv(x)`` of the
+   held-out runs (pooled over the repeats of the k-fold) give the multiplier
+   ``q``: their ``ceil(confidence (n + 1)) / (n + 1)`` quantile over the n runs
+   (:func:`conformal_quantile`).  The
+   single-run interval is ``mu(x) +- q sigma(x)`` around the model fitted on the
+   training points: split conformal with the cross-validated residuals as the
+   calibration set (MAPIE's ``method="base"`` with grouped folds; Barber et al.
+   2021, "Predictive inference with the jackknife+", call it the CV method).
+   Its coverage is the confidence level on average over new runs when the runs
+   are exchangeable and the model fitted on all training points is no worse
+   than the fold models; measured, not assumed: ``benchmarks/bench_intervals.py``.
+3. **Mean.**  The interval of the expected metric (no run noise) is
+   ``mu(x) +- q c s(x)``: the calibrated std of the mean with the same
+   multiplier.  The mean is never observed, so this one cannot be conformal;
+   its coverage is checked on synthetic data only.
+
+The two products behind the paper's hybrid indices, ``Q_s M_s`` and ``R_q Phi``,
+are calibrated the same way as two more quantities (:data:`QUANTITIES`): an index
+is a product divided by constant maxima, so its interval is the product's divided
+by the same constant, with no first-order propagation.
+
+All arrays have one column per quantity in :data:`QUANTITIES` order, in the metrics'
+units (the products in the products of the units).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from analysis.metrics.dataset import METRICS, point_groups
+from analysis.surrogate.candidates import GPSurrogate
+
+#: The four metrics and the two products of the hybrid indices (throughput: Q_s M_s, defect: R_q Phi).
+QUANTITIES = (*METRICS, "throughput_product", "defect_product")
+
+#: Each product's two factors.
+PRODUCTS = {"throughput_product": ("throughput_mm2_s", "mass_g"),
+            "defect_product": ("roughness_um", "porosity_pct")}
+
+METHOD = ("grouped cross-conformal (split conformal on the k-fold cross-validated residuals, "
+          "folds by (U, omega) point), scores normalised by sqrt((c std)^2 + (rho mean)^2)")
+
+
+def check_confidence(confidence):
+    """``confidence`` as a float strictly between 0 and 1; a ValueError naming it otherwise."""
+    try:
+        value = float(confidence)
+    except (TypeError, ValueError):
+        raise ValueError(f"confidence must be a number between 0 and 1, got {confidence!r}") from None
+    if not 0 < value < 1:       # also rejects NaN
+        raise ValueError(f"confidence must be between 0 and 1 (e.g. 0.9), got {confidence}")
+    return value
+
+
+def with_products(mean, std=None):
+    """Append the product columns of :data:`PRODUCTS` to metric columns.
+
+    Parameters
+    ----------
+    mean : array_like, shape (n, 4)
+        Metrics in :data:`METRICS` order (metric units).
+    std : array_like, shape (n, 4), optional
+        Their std; the products' std is first order, the factors' errors independent:
+        ``std(a b) = hypot(std_a b, a std_b)``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, 6), or a pair of them with ``std``
+    """
+    mean = np.asarray(mean, float)
+    col = {m: j for j, m in enumerate(METRICS)}
+    pairs = [(col[a], col[b]) for a, b in PRODUCTS.values()]
+    out = np.column_stack([mean, *(mean[:, a] * mean[:, b] for a, b in pairs)])
+    if std is None:
+        return out
+    std = np.asarray(std, float)
+    return out, np.column_stack([std, *(np.hypot(std[:, a] * mean[:, b], mean[:, a] * std[:, b])
+                                        for a, b in pairs)])
+
+
+def relative_noise(df, n_restarts=0, random_state=0):
+    """Run-to-run noise of each quantity relative to its value, shape (6,) (dimensionless).
+
+    With replicates (>= 2 runs at some point): the pooled relative seed-to-seed sd,
+    ``sqrt(mean over runs of ((y - point mean) / point mean)^2 x n/(n - points))``.
+    With one run per point: the white-noise std of a :class:`GPSurrogate` fitted to
+    all runs, over the mean |metric|.  The products: ``hypot`` of their factors'
+    (independent noise, first order).
+
+    Returns
+    -------
+    rho : numpy.ndarray, shape (6,)
+    source : str
+        Which of the two estimates it is.
+    """
+    Y = df[list(METRICS)].to_numpy(float)
+    groups = point_groups(df)
+    counts = np.bincount(groups)
+    if (counts >= 2).any():
+        means = np.stack([np.bincount(groups, Y[:, j]) / counts for j in range(Y.shape[1])], axis=1)
+        rel = Y / means[groups] - 1.0
+        dof = len(Y) - len(counts)
+        rho = np.sqrt((rel ** 2).sum(axis=0) / dof)
+        source = f"pooled seed-to-seed sd of {len(Y)} runs at {len(counts)} points (replicates)"
+    else:
+        gp = GPSurrogate(n_restarts=n_restarts, random_state=random_state).fit(df[["U_mm_s", "omega_rad_s"]]
+                                                                                .to_numpy(float), Y)
+        rho = gp.noise_std_ / np.abs(Y).mean(axis=0)
+        source = "Gaussian process white-noise term (one run per point)"
+    col = {m: j for j, m in enumerate(METRICS)}
+    rho = np.r_[rho, [np.hypot(rho[col[a]], rho[col[b]]) for a, b in PRODUCTS.values()]]
+    return rho, source
+
+
+def conformal_quantile(scores, confidence, n_runs=None):
+    """The split-conformal quantile of non-negative scores, per column.
+
+    Parameters
+    ----------
+    scores : array_like, shape (m, k)
+        Scores of held-out runs (several cross-validation repeats may be pooled).
+    confidence : float
+        Coverage level, 0 < confidence < 1.
+    n_runs : int, optional
+        Distinct runs the scores come from (default m).  With one score per run this
+        is split conformal's ``ceil(confidence (n + 1))``-th smallest score, whose
+        coverage of a new run is ``ceil(confidence (n + 1)) / (n + 1)`` on average
+        over calibration sets; scores pooled over repeats are taken at that level
+        (``method="higher"``), the same expected coverage.
+
+    Returns
+    -------
+    numpy.ndarray, shape (k,)
+        ``inf`` where ``ceil(confidence (n + 1)) > n`` (too few runs for the confidence).
+    """
+    scores = np.asarray(scores, float)
+    n = len(scores) if n_runs is None else int(n_runs)
+    rank = math.ceil(check_confidence(confidence) * (n + 1))
+    if rank > n:
+        return np.full(scores.shape[1:], np.inf)
+    return np.quantile(scores, rank / (n + 1), axis=0, method="higher")
+
+
+def _scale(mean, std, c, rho):
+    """Single-run predictive scale sqrt((c s)^2 + (rho mu)^2), never below 1e-12 |mu|."""
+    return np.maximum(np.hypot(c * std, rho * mean), 1e-12 * np.abs(mean) + 1e-300)
+
+
+def calibrate(y, mean, std, rho):
+    """Inflation factor c of the model's std and the conformal scores of held-out runs.
+
+    Parameters
+    ----------
+    y, mean, std : array_like, shape (m, 6)
+        Held-out runs (:func:`with_products`), their cross-validated predictions and
+        the predicting model's std of its mean.
+    rho : array_like, shape (6,)
+        Relative run-to-run noise (:func:`relative_noise`).
+
+    Returns
+    -------
+    c : numpy.ndarray, shape (6,)
+        ``max(mean(r^2) - mean((rho mu)^2), 0) / mean(s^2)``, square-rooted (0 for a
+        model without spread).
+    scores : numpy.ndarray, shape (m, 6)
+        ``|y - mu| / sigma`` (:mod:`module docs <analysis.surrogate.intervals>`).
+    """
+    y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+    rho = np.asarray(rho, float)
+    excess = np.mean((y - mean) ** 2, axis=0) - np.mean((rho * mean) ** 2, axis=0)
+    spread = np.mean(std ** 2, axis=0)
+    c = np.sqrt(np.where(spread > 0, np.clip(excess, 0, None) / np.where(spread > 0, spread, 1), 0.0))
+    return c, np.abs(y - mean) / _scale(mean, std, c, rho)
+
+
+def interval_score(y, lower, upper, confidence):
+    """Interval score of central intervals (Gneiting & Raftery 2007, eq. 43), per run.
+
+    ``(u - l) + (2/alpha) (l - y)+ + (2/alpha) (y - u)+`` with ``alpha = 1 - confidence``:
+    the width, plus a penalty for each miss growing with its distance; lower is
+    better, and its expectation is least for the true quantiles (a proper score).
+    Units of y.
+    """
+    alpha = 1.0 - check_confidence(confidence)
+    y, lower, upper = (np.asarray(a, float) for a in (y, lower, upper))
+    return (upper - lower) + 2 / alpha * (np.clip(lower - y, 0, None) + np.clip(y - upper, 0, None))
+
+
+class CalibratedSurrogate:
+    """A fitted candidate with its calibrated intervals.
+
+    Parameters
+    ----------
+    model : fitted estimator
+        Gives ``predict(X, return_std=True)`` (the candidates do).
+    c : array_like, shape (6,)
+        Inflation of the model's std (:func:`calibrate`).
+    rho : array_like, shape (6,)
+        Relative run-to-run noise (:func:`relative_noise`).
+    scores : array_like, shape (m, 6)
+        Conformal scores of the held-out runs (:func:`calibrate`).
+    n_runs : int
+        Distinct runs behind the scores.
+    confidence : float
+        Default coverage level of :meth:`predict_interval` (config ``surrogate.confidence``).
+    noise_source : str
+        Where ``rho`` comes from.
+
+    ``predict(X)`` is the model's; ``predict(X, return_std=True)`` gives the
+    calibrated std of the mean, ``c s(x)``; :meth:`predict_interval` the intervals.
+    """
+
+    provides_std = True
+    method = METHOD
+
+    def __init__(self, model, c, rho, scores, n_runs, confidence=0.9, noise_source=""):
+        self.model = model
+        self.c = np.asarray(c, float)
+        self.rho = np.asarray(rho, float)
+        self.scores = np.asarray(scores, float)
+        self.n_runs = int(n_runs)
+        self.confidence = check_confidence(confidence)
+        self.noise_source = noise_source
+
+    @property
+    def name(self):
+        return getattr(self.model, "name", type(self.model).__name__)
+
+    def predict(self, X, return_std=False):
+        """Predicted metrics (n, 4); with ``return_std`` also the calibrated std of the mean, ``c s(x)``."""
+        if not return_std:
+            return self.model.predict(X)
+        mean, std = self.model.predict(X, return_std=True)
+        return mean, np.asarray(std, float) * self.c[:len(METRICS)]
+
+    def multiplier(self, confidence=None):
+        """The conformal multiplier q per quantity, shape (6,)."""
+        return conformal_quantile(self.scores, self.confidence if confidence is None else confidence,
+                                  self.n_runs)
+
+    def runs_needed(self, confidence=None):
+        """Least calibration runs for a finite interval at ``confidence``: ``ceil(c / (1 - c))``."""
+        c = self.confidence if confidence is None else check_confidence(confidence)
+        return math.ceil(c / (1 - c) - 1e-9)
+
+    def is_finite(self, confidence=None):
+        """True if there are enough calibration runs for finite intervals at ``confidence``."""
+        return self.n_runs >= self.runs_needed(confidence)
+
+    def predict_interval(self, X, confidence=None, kind="run"):
+        """Lower and upper ends of the central intervals of the six :data:`QUANTITIES` at X.
+
+        Parameters
+        ----------
+        X : array_like, shape (n, 2)
+            U (mm/s), omega (rad/s).
+        confidence : float, optional
+            Coverage level (default ``self.confidence``).
+        kind : {"run", "mean"}
+            ``run``: where a single new DEM run lands (noise included);
+            ``mean``: the expected metric.
+
+        Returns
+        -------
+        mean, lower, upper : numpy.ndarray, shape (n, 6)
+        """
+        if kind not in ("run", "mean"):
+            raise ValueError(f"kind must be 'run' or 'mean', got {kind!r}")
+        mean, run, of_mean = self.half_widths(X, confidence)
+        half = run if kind == "run" else of_mean
+        return mean, mean - half, mean + half
+
+    def half_widths(self, X, confidence=None):
+        """The six quantities at X and the half-widths of their run and mean intervals.
+
+        Returns
+        -------
+        mean, run, of_mean : numpy.ndarray, shape (n, 6)
+            ``q sigma(x)`` and ``q c s(x)`` (module docs).
+        """
+        mean, std = with_products(*self.model.predict(np.asarray(X, float), return_std=True))
+        q = self.multiplier(confidence)
+        return mean, q * _scale(mean, std, self.c, self.rho), q * self.c * std
+
+    def summary(self):
+        """JSON-ready: method, noise source, rho, c and the multiplier at the default confidence."""
+        q = self.multiplier()
+        return {"method": self.method, "confidence": self.confidence, "n_calibration_runs": self.n_runs,
+                "noise_source": self.noise_source,
+                **{k: {name: float(v) for name, v in zip(QUANTITIES, values)}
+                   for k, values in (("relative_noise", self.rho), ("std_inflation", self.c),
+                                     ("multiplier", q))}}
+
+
+def calibrated_from_predictions(model, predictions, df, rho, confidence, noise_source=""):
+    """Wrap ``model`` with the calibration from its cross-validated predictions.
+
+    Parameters
+    ----------
+    model : fitted estimator with ``predict(X, return_std=True)``
+    predictions : pandas.DataFrame
+        The model's held-out predictions (:func:`analysis.surrogate.selection.cross_validate_models`
+        with ``return_predictions``, rows of one model and the ``kfold`` scheme):
+        ``row``, ``<metric>`` (prediction) and ``<metric>_std`` columns.
+    df : pandas.DataFrame
+        The runs (rows as ``predictions["row"]``).
+    rho, confidence, noise_source
+        As :class:`CalibratedSurrogate`.
+    """
+    rows = predictions["row"].to_numpy(int)
+    y = with_products(df[list(METRICS)].to_numpy(float)[rows])
+    mean, std = with_products(predictions[list(METRICS)].to_numpy(float),
+                              predictions[[f"{m}_std" for m in METRICS]].to_numpy(float))
+    c, scores = calibrate(y, mean, std, rho)
+    return CalibratedSurrogate(model, c, rho, scores, len(np.unique(rows)), confidence, noise_source)
+
+
+def interval_frame(model, X, confidence=None):
+    """The run and mean intervals of the six quantities at X as columns.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``<q>_lo``, ``<q>_hi`` (single run) and ``<q>_mean_lo``, ``<q>_mean_hi`` for
+        every quantity q of :data:`QUANTITIES`.
+    """
+    mean, run, of_mean = model.half_widths(X, confidence)
+    cols = {}
+    for j, q in enumerate(QUANTITIES):
+        cols.update({f"{q}_lo": mean[:, j] - run[:, j], f"{q}_hi": mean[:, j] + run[:, j],
+                     f"{q}_mean_lo": mean[:, j] - of_mean[:, j], f"{q}_mean_hi": mean[:, j] + of_mean[:, j]})
+    return pd.DataFrame(cols)
