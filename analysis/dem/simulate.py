@@ -166,7 +166,8 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     health["strays_removed"] = strays
     health["heap_toe_m"] = float(atoms["x"].max() + atoms["radius"].max())
     summary = {"wall_s": log["wall_s"], "cpu_s": log["cpu_s"], "steps": int(log["thermo"]["Step"].iloc[-1]),
-               "timestep_s": s.timestep, "rayleigh_fraction": log["max_rayleigh_fraction"],
+               "mpi_launcher": log["launcher"], "timestep_s": s.timestep,
+               "rayleigh_fraction": log["max_rayleigh_fraction"],
                "hertz_fraction": log["max_hertz_fraction"], "inserted": log["inserted"], **peak, **health}
     _publish(out, summary, "settled.restart", "settled.dump")
     return summary
@@ -319,7 +320,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
     summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"], "cpu_s": log["cpu_s"],
                "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
-               "processors": context["processors"],
+               "mpi_launcher": log["launcher"], "processors": context["processors"],
                "roller_start_m": x0, "roller_travel_m": speed * travel_steps * s.timestep,
                "rayleigh_fraction": log["max_rayleigh_fraction"], "hertz_fraction": log["max_hertz_fraction"],
                "particle_steps_per_s": len(atoms) * (last - first) / log["wall_s"],
