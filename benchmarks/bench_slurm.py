@@ -3,7 +3,7 @@
 Run from the repository root, as root, after ``apt-get install slurm-wlm munge libpmix-dev
 slurmdbd mariadb-server`` (Debian 12: SLURM 22.05.8)::
 
-    .venv/bin/python benchmarks/bench_slurm.py [--keep]
+    .venv/bin/python benchmarks/bench_slurm.py [--keep] [--scratch DIR] [--limit-point 70:-5]
 
 1. **A failing job is seen**: on a one-node cluster with accounting (munge, MariaDB,
    slurmdbd, slurmctld, slurmd; :mod:`analysis.slurm_cluster`), a settle that cannot
@@ -12,13 +12,14 @@ slurmdbd mariadb-server`` (Debian 12: SLURM 22.05.8)::
    ``retries``), and Snakemake must stop with an error; status by ``sacct``.
 2. **Workflow to maps**: the CI's smoke workflow (``.test/config.yaml``, 6 runs) through
    ``profiles/slurm`` as it is, with 2-rank settle and spreads (``fidelity.smoke.mpi_ranks=2``).
-3. **Time limit**: in the same folder one more spread (U = 40 mm/s, omega = 0, the
-   slowest point) with ``runtime_min: 1`` and 8 checkpoints: SLURM kills it at its limit
-   (TIMEOUT), Snakemake's retries resubmit it (``--retries 6`` here: the profile's 2 are
-   for real limits, which a spread rarely meets), and it resumes from its checkpoint.
+3. **Time limit**: in the same folder one more spread (``--limit-point``, a point not in
+   the sweep) with ``runtime_min: 1`` and ``--limit-checkpoints`` checkpoints: SLURM kills
+   it at its limit (TIMEOUT), Snakemake's retries resubmit it (``--limit-retries``: the
+   profile's 2 are for real limits, which a spread rarely meets; a 1-minute limit on a
+   spread of several minutes needs more), and each attempt resumes from its newest checkpoint.
 4. The failing settle again on a second cluster **without accounting** (no slurmdbd:
    ``sacct`` answers "accounting storage is disabled"); status by ``squeue``, the profile's.
-5. **Local reference**: the same workflow and the U = 40 mm/s spread with ``--cores 2``
+5. **Local reference**: the same workflow and the time-limited point with ``--cores 2``
    (mpirun, 2 ranks), no scheduler.
 
 Checks: the SLURM workflow made the maps and a dataset with every run; each SLURM run's
@@ -53,10 +54,7 @@ from analysis.slurm_cluster import OneNodeCluster, job_table, missing_commands, 
 
 ROOT = Path(__file__).resolve().parents[1]
 RANKS = {"smoke": {"mpi_ranks": 2}}
-SLOW_RUN = "results/smoke/runs/U40_w0_r0/health.json"
-LIMITED = {"smoke": {"mpi_ranks": 2, "runtime_min": 1, "checkpoints_per_run": 8}}
 SEEN_WITHIN_S = 60
-LIMIT_RETRIES = 6  # a 1-minute limit on a 2-6 minute spread: each attempt resumes a little further
 
 
 def snakemake(workdir, *extra, profile=True):
@@ -126,6 +124,12 @@ def compare(slurm_runs, local_runs, tolerance):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--keep", action="store_true", help="keep the scratch folder")
+    parser.add_argument("--scratch", type=Path, help="a scratch folder of an earlier run: the phases it "
+                        "finished (its out.json) are not run again")
+    parser.add_argument("--limit-point", default="70:-5", help="U:omega of the time-limited spread (mm/s:rad/s); "
+                        "it must need several minutes but fewer than about --limit-retries")
+    parser.add_argument("--limit-checkpoints", type=int, default=20, help="its checkpoints_per_run")
+    parser.add_argument("--limit-retries", type=int, default=8, help="Snakemake's --retries for it")
     args = parser.parse_args(argv)
     # a SIGTERM (or SIGINT, which a background job ignores) unwinds: every daemon is stopped on the way out
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
@@ -134,49 +138,87 @@ def main(argv=None):
         print(f"error: {', '.join(missing)} not found: apt-get install slurm-wlm munge libpmix-dev slurmdbd "
               "mariadb-server", file=sys.stderr)
         return 2
-    scratch = Path(tempfile.mkdtemp(prefix="spreadmap-slurm-"))
+    U, omega = (float(v) for v in args.limit_point.split(":"))
+    limited_run = f"U{U:g}_w{omega:g}_r0"
+    limited_target = f"results/smoke/runs/{limited_run}/health.json"
+    limited_config = {"smoke": {**RANKS["smoke"], "runtime_min": 1, "checkpoints_per_run": args.limit_checkpoints}}
+    scratch = args.scratch or Path(tempfile.mkdtemp(prefix="spreadmap-slurm-"))
     slurm_wd, local_wd, fail_wd, fail_noacct_wd = (scratch / n for n in ("slurm", "local", "fail", "fail-noacct"))
     tolerance = {m: 4 * sd for m, sd in
                  pooled_seed_sd(pd.read_csv(ROOT / "benchmarks/measured/noise_smoke.csv")).items()}
-    out, checks = {}, {}
+    saved = scratch / "out.json"
+    out = json.loads(saved.read_text()) if saved.exists() else {}
+    out.setdefault("stopped", {})
+    out["limit_setup"] = {"run": limited_run, "checkpoints": args.limit_checkpoints, "retries": args.limit_retries}
+
+    def save():
+        saved.write_text(json.dumps(out, default=str, indent=1))
+
     print(f"scratch: {scratch}", flush=True)
     try:
-        with OneNodeCluster(scratch / "cluster", accounting=True) as cluster:
-            out["versions"] = cluster.versions()
-            out["stopped"] = {}
-            print("1. a failing job, accounting on, status by sacct ...", flush=True)
-            out["fail_sacct"] = failing_settle(cluster, fail_wd, "sacct", scratch / "fail.log")
-            print(f"   {out['fail_sacct']}", flush=True)
-            print("2. smoke workflow to maps through profiles/slurm ...", flush=True)
-            code, wall, text = run(snakemake(slurm_wd, "--config", f"fidelity={json.dumps(RANKS)}"), cluster.env(),
-                                   scratch / "slurm.log")
-            out["workflow"] = {"returncode": code, "wall_s": wall}
-            checks["SLURM workflow finished (exit 0) with the maps"] = (
-                code == 0 and (slurm_wd / "results/smoke/maps/process_map.png").exists())
-            print(f"   exit {code} after {wall:.0f} s", flush=True)
-            print("3. a spread over its time limit ...", flush=True)
-            before = job_table(cluster.env(), True).job.max()
-            code, wall, text = run(snakemake(slurm_wd, "--config", f"fidelity={json.dumps(LIMITED)}",
-                                             "--retries", str(LIMIT_RETRIES), "--", SLOW_RUN),
-                                   cluster.env(), scratch / "limit.log")
-            jobs = job_table(cluster.env(), True)
-            jobs = jobs[jobs.job > before]
-            out["limit"] = {"returncode": code, "wall_s": wall, "states": list(jobs.state),
-                            "elapsed_s": [(j.end - j.start).total_seconds() for j in jobs.itertuples()],
-                            "latencies": failure_latencies(jobs, snakemake_job_events(text))}
-            checks["time-limited spread: killed (TIMEOUT), resubmitted, finished"] = (
-                code == 0 and "TIMEOUT" in out["limit"]["states"] and out["limit"]["states"][-1] == "COMPLETED")
-            print(f"   exit {code} after {wall:.0f} s, jobs {out['limit']['states']}", flush=True)
-            out["stopped"]["accounting"] = cluster.stop()
-        with OneNodeCluster(scratch / "cluster-noacct", accounting=False) as cluster:
-            print("4. a failing job, no accounting, status by squeue (the profile's) ...", flush=True)
-            probe = subprocess.run(["sacct", "-X"], env=cluster.env(), capture_output=True, text=True)
-            out["sacct_without_accounting"] = (probe.stdout + probe.stderr).strip().splitlines()[-1]
-            out["fail_squeue"] = failing_settle(cluster, fail_noacct_wd, None, scratch / "fail-noacct.log")
-            print(f"   {out['fail_squeue']}", flush=True)
-            out["stopped"]["no accounting"] = cluster.stop()
+        if not {"fail_sacct", "workflow", "limit"} <= set(out):
+            with OneNodeCluster(scratch / "cluster", accounting=True) as cluster:
+                out["versions"] = cluster.versions()
+                if "fail_sacct" not in out:
+                    print("1. a failing job, accounting on, status by sacct ...", flush=True)
+                    out["fail_sacct"] = failing_settle(cluster, fail_wd, "sacct", scratch / "fail.log")
+                    print(f"   {out['fail_sacct']}", flush=True)
+                    save()
+                if "workflow" not in out:
+                    print("2. smoke workflow to maps through profiles/slurm ...", flush=True)
+                    code, wall, text = run(snakemake(slurm_wd, "--config", f"fidelity={json.dumps(RANKS)}"),
+                                           cluster.env(), scratch / "slurm.log")
+                    out["workflow"] = {"returncode": code, "wall_s": wall}
+                    print(f"   exit {code} after {wall:.0f} s", flush=True)
+                    save()
+                print(f"3. a spread over its time limit ({limited_run}) ...", flush=True)
+                before = job_table(cluster.env(), True).job.max()
+                before = 0 if pd.isna(before) else before
+                code, wall, text = run(snakemake(slurm_wd, "--config", f"fidelity={json.dumps(limited_config)}",
+                                                 "--retries", str(args.limit_retries), "--", limited_target),
+                                       cluster.env(), scratch / "limit.log")
+                jobs = job_table(cluster.env(), True)
+                jobs = jobs[jobs.job > before]
+                out["limit"] = {"returncode": code, "wall_s": wall, "states": list(jobs.state),
+                                "elapsed_s": [(j.end - j.start).total_seconds() for j in jobs.itertuples()],
+                                "latencies": failure_latencies(jobs, snakemake_job_events(text))}
+                print(f"   exit {code} after {wall:.0f} s, jobs {out['limit']['states']}", flush=True)
+                out["stopped"]["accounting"] = cluster.stop()
+                save()
+        if "fail_squeue" not in out:
+            with OneNodeCluster(scratch / "cluster-noacct", accounting=False) as cluster:
+                print("4. a failing job, no accounting, status by squeue (the profile's) ...", flush=True)
+                probe = subprocess.run(["sacct", "-X"], env=cluster.env(), capture_output=True, text=True)
+                out["sacct_without_accounting"] = (probe.stdout + probe.stderr).strip().splitlines()[-1]
+                out["fail_squeue"] = failing_settle(cluster, fail_noacct_wd, None, scratch / "fail-noacct.log")
+                print(f"   {out['fail_squeue']}", flush=True)
+                out["stopped"]["no accounting"] = cluster.stop()
+                save()
     finally:
         print(f"daemons stopped (exit codes): {out.get('stopped')}", flush=True)
+    print("5. local reference (mpirun, 2 ranks) ...", flush=True)
+    code, wall, _ = run(snakemake(local_wd, "--config", f"fidelity={json.dumps(RANKS)}", "--", "all",
+                                  limited_target, profile=False), None, scratch / "local.log")
+    out["local"] = {"returncode": code, "wall_s": wall}
+    print(f"   exit {code} after {wall:.0f} s", flush=True)
+    save()
+    table = compare(slurm_wd / "results/smoke/runs", local_wd / "results/smoke/runs", tolerance)
+    checks = evaluate(out, table, slurm_wd, limited_run)
+    write(out, checks, table, tolerance)
+    if not args.keep:
+        shutil.rmtree(scratch, ignore_errors=True)
+    failed = [name for name, ok in checks.items() if not ok]
+    print("all checks passed" if not failed else "FAILED: " + "; ".join(failed))
+    return 1 if failed else 0
+
+
+def evaluate(out, table, slurm_wd, limited_run):
+    """The benchmark's checks, by name: True where passed."""
+    checks = {"SLURM workflow finished (exit 0) with the maps": (
+        out["workflow"]["returncode"] == 0 and (slurm_wd / "results/smoke/maps/process_map.png").exists())}
+    states = out["limit"]["states"]
+    checks["time-limited spread: killed (TIMEOUT), resubmitted, finished"] = (
+        out["limit"]["returncode"] == 0 and "TIMEOUT" in states and states[-1] == "COMPLETED")
     for name in ("fail_sacct", "fail_squeue"):
         f = out[name]
         lat = [s for _, s in f["latencies"].values()]
@@ -186,35 +228,27 @@ def main(argv=None):
             s is not None and s <= SEEN_WITHIN_S for s in lat)
         checks[f"{name}: the rule's error names the launcher and the fix"] = (
             "MPI could not start" in f["rule_error"] and "'srun'" in f["rule_error"] and "Fix:" in f["rule_error"])
-    print("5. local reference (mpirun, 2 ranks) ...", flush=True)
-    code, wall, _ = run(snakemake(local_wd, "--config", f"fidelity={json.dumps(RANKS)}", "--", "all", SLOW_RUN,
-                                  profile=False), None, scratch / "local.log")
-    out["local"] = {"returncode": code, "wall_s": wall}
-    print(f"   exit {code} after {wall:.0f} s", flush=True)
-    (scratch / "out.json").write_text(json.dumps({**out, "checks": checks}, default=str, indent=1))
-    table = compare(slurm_wd / "results/smoke/runs", local_wd / "results/smoke/runs", tolerance)
     data = pd.read_csv(slurm_wd / "results/smoke/dataset.csv")
     checks["dataset.csv from SLURM has the 6 runs"] = len(data) == 6
     checks["every SLURM run within 4 seed sds of its local twin"] = bool(table.within_4_sd.all())
-    limited = table[table.run == "U40_w0_r0"].iloc[0]
-    checks["time-limited spread resumed from a checkpoint"] = limited.resumed_from_step > 0
-    checks["time-limited spread: same last step, roller end within 1e-6 m, every particle accounted for"] = (
-        limited.steps == limited.local_steps and limited.roller_end_dm < 1e-6 and limited.particles_balance == 0
-        and limited.lost == 0)
+    limited = table[table.run == limited_run]
+    if len(limited):
+        limited = limited.iloc[0]
+        checks["time-limited spread resumed from a checkpoint"] = bool(limited.resumed_from_step > 0)
+        checks["time-limited spread: same last step, roller end within 1e-6 m, every particle accounted for"] = bool(
+            limited.steps == limited.local_steps and limited.roller_end_dm < 1e-6
+            and limited.particles_balance == 0 and limited.lost == 0)
+    else:
+        checks["time-limited spread resumed from a checkpoint"] = False
     checks["SLURM spreads launched with srun --mpi=pmix"] = bool((table.slurm_launcher == "srun --mpi=pmix").all())
     checks["no half-written file"] = half_written_files(slurm_wd / "results") == []
-    write(out, checks, table, tolerance)
-    if not args.keep:
-        shutil.rmtree(scratch, ignore_errors=True)
-    failed = [name for name, ok in checks.items() if not ok]
-    print("all checks passed" if not failed else "FAILED: " + "; ".join(failed))
-    return 1 if failed else 0
+    return checks
 
 
 def write(out, checks, table, tolerance):
     dest = ROOT / "benchmarks/measured"
     table.to_csv(dest / "slurm.csv", index=False)
-    v = out["versions"]
+    v, ls = out["versions"], out["limit_setup"]
     lat = lambda f: ", ".join(f"job {j} {s}: {t:.0f} s" if t is not None else f"job {j} {s}: not seen"  # noqa: E731
                               for j, (s, t) in f["latencies"].items())
     lines = [
@@ -231,8 +265,9 @@ def write(out, checks, table, tolerance):
         "configuration written to a scratch folder (`analysis/slurm_cluster.py`).",
         f"- Smoke workflow to maps through `profiles/slurm` (6 spreads + 1 settle, 2 ranks each): exit "
         f"{out['workflow']['returncode']}, {out['workflow']['wall_s']:.0f} s; the same locally (`--cores 2`, "
-        f"mpirun) with the U = 40 mm/s spread: {out['local']['wall_s']:.0f} s.",
-        f"- Time limit: the U = 40 mm/s, omega = 0 spread with `runtime_min: 1`, 8 checkpoints: SLURM job states "
+        f"mpirun) with the time-limited point: {out['local']['wall_s']:.0f} s.",
+        f"- Time limit: the {ls['run']} spread with `runtime_min: 1`, {ls['checkpoints']} checkpoints, "
+        f"`--retries {ls['retries']}`: SLURM job states "
         f"{', '.join(out['limit']['states'])} (elapsed {', '.join(f'{s:.0f}' for s in out['limit']['elapsed_s'])} s), "
         f"exit {out['limit']['returncode']}, {out['limit']['wall_s']:.0f} s; "
         f"seen after the job's end: {lat(out['limit']) or 'n/a'}.",
