@@ -252,7 +252,7 @@ class OneNodeCluster:
         client = [self._which("mariadb"), "--no-defaults", f"--socket={sock}", "-u", "root"]
         self._wait("mariadb", lambda: subprocess.run([*client, "-e", "select 1"], capture_output=True,
                                                       timeout=10).returncode == 0)
-        sql = (f"CREATE USER IF NOT EXISTS 'slurm'@'127.0.0.1' IDENTIFIED BY '{self.db_password}';"
+        sql = (f"CREATE OR REPLACE USER 'slurm'@'127.0.0.1' IDENTIFIED BY '{self.db_password}';"
                "GRANT ALL ON slurm_acct_db.* TO 'slurm'@'127.0.0.1'; FLUSH PRIVILEGES;")
         proc = subprocess.run([*client, "-e", sql], capture_output=True, text=True, timeout=30)
         if proc.returncode != 0:

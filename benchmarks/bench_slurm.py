@@ -70,6 +70,15 @@ def run(cmd, env, log):
     return proc.returncode, time.perf_counter() - start, Path(log).read_text()
 
 
+def fresh(path):
+    """``path``, or ``path-2``, ``path-3``... if it is taken (a cluster's folder is never reused)."""
+    n, candidate = 1, path
+    while candidate.exists():
+        n += 1
+        candidate = path.with_name(f"{path.name}-{n}")
+    return candidate
+
+
 def failure_latencies(jobs, events):
     """Seconds from SLURM's end of each failed or timed-out job to Snakemake's error report."""
     failed = jobs[jobs.state.isin(["FAILED", "TIMEOUT", "CANCELLED", "OUT_OF_MEMORY", "NODE_FAIL"])]
@@ -157,7 +166,7 @@ def main(argv=None):
     print(f"scratch: {scratch}", flush=True)
     try:
         if not {"fail_sacct", "workflow", "limit"} <= set(out):
-            with OneNodeCluster(scratch / "cluster", accounting=True) as cluster:
+            with OneNodeCluster(fresh(scratch / "cluster"), accounting=True) as cluster:
                 out["versions"] = cluster.versions()
                 if "fail_sacct" not in out:
                     print("1. a failing job, accounting on, status by sacct ...", flush=True)
@@ -186,7 +195,7 @@ def main(argv=None):
                 out["stopped"]["accounting"] = cluster.stop()
                 save()
         if "fail_squeue" not in out:
-            with OneNodeCluster(scratch / "cluster-noacct", accounting=False) as cluster:
+            with OneNodeCluster(fresh(scratch / "cluster-noacct"), accounting=False) as cluster:
                 print("4. a failing job, no accounting, status by squeue (the profile's) ...", flush=True)
                 probe = subprocess.run(["sacct", "-X"], env=cluster.env(), capture_output=True, text=True)
                 out["sacct_without_accounting"] = (probe.stdout + probe.stderr).strip().splitlines()[-1]
