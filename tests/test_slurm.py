@@ -1,8 +1,13 @@
 """The SLURM path's own pieces without a scheduler: the MPI launcher's start-up check and its
 error, the one-node cluster's configuration, and reading Snakemake's log for when it saw a job
 end. The real-scheduler run is ``benchmarks/bench_slurm.py`` (benchmarks/measured/slurm.md)."""
+import signal
 import stat
+import subprocess
+import sys
+import time
 
+import psutil
 import pytest
 
 from analysis.dem.liggghts import MpiStartError, check_launcher, run
@@ -62,3 +67,36 @@ Trying to restart job 5.
     assert list(events.event) == ["submitted", "error"] and list(events.job) == [4, 4]
     error = events[events.event == "error"].iloc[0]
     assert error.rule == "settle" and str(error.seen) == "2026-12-02 00:49:50"
+
+
+LONG_INPUT = """atom_style granular
+atom_modify map array sort 0 0
+boundary p p p
+newton off
+communicate single vel yes
+units si
+region box block 0 0.001 0 0.001 0 0.001 units box
+create_box 1 box
+neighbor 0.0001 bin
+timestep 1e-6
+run 100000000
+"""
+
+
+def test_a_run_stopped_by_sigterm_is_refused(tmp_path):
+    """SLURM ends a job at its time limit with SIGTERM; LIGGGHTS then writes its own restart file
+    and exits 0 with no ERROR line: the wrapper must not take that for a finished run."""
+    (tmp_path / "long.in").write_text(LONG_INPUT)
+    proc = subprocess.Popen([sys.executable, "-m", "analysis.dem.liggghts", str(tmp_path / "long.in")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline, ranks = time.time() + 60, []
+    while time.time() < deadline and not ranks:
+        ranks = [c for c in psutil.Process(proc.pid).children(recursive=True) if c.name() == "liggghts"]
+        time.sleep(0.1)
+    time.sleep(3)  # into its run (an empty box: set up at once)
+    for rank in ranks:
+        rank.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1, out + err
+    assert "was stopped by SIGTERM or SIGINT" in err and "exit code 0" in err
+    assert list(tmp_path.glob("restart_forced_liggghts_*.data"))      # LIGGGHTS' own handler ran

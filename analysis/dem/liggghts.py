@@ -265,6 +265,10 @@ def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str |
     if prefix and proc.returncode != 0 and "LIGGGHTS (Version" not in log_text:  # died before its first line
         raise MpiStartError(f"MPI could not start {ranks} LIGGGHTS ranks with '{' '.join(prefix)}' ({source}): "
                             f"{_mpi_reason(screen_text)}. Fix: {MPI_FIX}")
+    if "SIGINT/SIGTERM caught" in screen_text + log_text:  # LIGGGHTS' own handler: restart file, then exit 0
+        raise LiggghtsError(f"LIGGGHTS on {input_file.name} was stopped by SIGTERM or SIGINT (a time limit, "
+                            f"scancel or a kill) and quit before its end (exit code {proc.returncode}); "
+                            f"full log: {log_file}")
     if proc.returncode != 0 or error:
         where = _failing_command(log_text)
         tail = "\n".join(screen_text.strip().splitlines()[-8:])

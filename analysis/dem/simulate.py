@@ -302,6 +302,10 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     _check_timestep(log, s)
     health = check_kinetic_energy(log, wall_speed=speed + abs(omega_rad_s) * s.roller_radius,
                                   squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
+    if not (out / "final.dump.part").is_file():
+        tail = "\n".join((out / "spread.log.screen").read_text(errors="replace").strip().splitlines()[-8:])
+        raise LiggghtsError(f"LIGGGHTS ended (exit 0, no ERROR line) without writing {out / 'final.dump.part'}; "
+                            f"last screen lines:\n{tail}")
     atoms = read_dump(out / "final.dump.part").atoms
     inside = through_roller(atoms, x0 + speed * travel_steps * s.timestep, context["roller_z"], s.roller_radius)
     if inside:
@@ -327,6 +331,8 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                **health}
     _publish(out, summary, "final.dump")
     shutil.rmtree(out / CHECKPOINT_DIR, ignore_errors=True)
+    for forced in out.glob("restart_forced_liggghts_*.data"):  # LIGGGHTS' own, written when a kill stopped it
+        forced.unlink()
     return summary
 
 
