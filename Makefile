@@ -15,7 +15,10 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 APT_PACKAGES := liggghts liggghts-doc openmpi-bin libegl1 libegl-mesa0 libgl1-mesa-dri
 export VTK_DEFAULT_OPENGL_WINDOW := vtkEGLRenderWindow
 
-.PHONY: map test setup system-packages report clean
+# The one-node SLURM cluster of benchmarks/bench_slurm.py (not needed by `make test`).
+SLURM_APT_PACKAGES := slurm-wlm munge libpmix-dev slurmdbd mariadb-server
+
+.PHONY: map test setup system-packages report clean bench-slurm
 
 map: setup
 	$(PYTHON) -m snakemake --cores $(CORES) --config level=$(LEVEL) --rerun-incomplete
@@ -25,6 +28,15 @@ map: setup
 test: setup
 	PYTHON=$(PYTHON) .ci/lint
 	$(PYTHON) -m pytest -n 2 --dist loadscope --no-loadscope-reorder -q tests
+
+# The SLURM path on a real one-node cluster (root; about 70 min on 2 cores): benchmarks/measured/slurm.md
+bench-slurm: setup
+	@if ! dpkg -s $(SLURM_APT_PACKAGES) >/dev/null 2>&1; then \
+	    echo "Installing $(SLURM_APT_PACKAGES) from Debian's packages"; \
+	    $(SUDO) apt-get update -qq && \
+	    DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $(SLURM_APT_PACKAGES) >/dev/null; \
+	fi
+	$(PYTHON) benchmarks/bench_slurm.py
 
 setup: system-packages $(VENV)/.installed
 

@@ -187,9 +187,9 @@ def test_read_log_parses_thermo_and_insertions():
 
 
 def test_killed_spread_resumes_from_its_newest_checkpoint(smoke, config):
-    """SIGKILL a spread (the scheduler's time limit) after its second checkpoint:
-    the next call resumes there, the roller ends where the uninterrupted run's
-    did, and nothing is lost."""
+    """SIGKILL a spread (the scheduler's time limit) after its second checkpoint,
+    and the resumed run after its third: the last call resumes there, the roller
+    ends where the uninterrupted run's did, and nothing is lost."""
     root, s = smoke["root"], smoke["scene"]
     out = root / "killed"
     cmd = [sys.executable, "-m", "analysis.dem.simulate", "spread", "--level", "smoke", "--U", str(U_MM_S),
@@ -209,8 +209,19 @@ def test_killed_spread_resumes_from_its_newest_checkpoint(smoke, config):
     assert not (out / "health.json").exists() and not (out / "final.dump").exists()
     # the older checkpoint was removed once the newer was written
     assert not (out / "checkpoint" / f"travel.{plan[0][0]}.restart").exists()
+    # killed again after the resumed run's own next checkpoint (a second time limit): the last
+    # resume starts from a restart file that a resumed run wrote
+    job = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                           start_new_session=True)
+    third = out / "checkpoint" / f"travel.{plan[2][0]}.restart"
+    while time.time() < deadline + 300 and not third.exists():
+        time.sleep(0.2)
+    time.sleep(0.5)
+    os.killpg(job.pid, signal.SIGKILL)
+    job.wait()
+    assert third.exists() and not (out / "health.json").exists()
     resumed = spread(config, "smoke", U_MM_S, OMEGA, root / "meshes", root / "settle", out)
-    assert resumed["resumed_from_step"] >= plan[1][0]
+    assert resumed["resumed_from_step"] >= plan[2][0]
     # (chunked runs are not bit-identical: the powder ahead of the roller may differ by a particle)
     whole = lambda h: h["atoms"] + h["removed_ahead_of_roller"] - h["fed_particles"]  # noqa: E731
     assert whole(resumed) == whole(smoke["spread"]) and resumed["lost"] == 0

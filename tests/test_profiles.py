@@ -110,12 +110,18 @@ def test_cluster_keys_are_optional(config):
     assert s.runtime_min is None and s.mem_mb_per_rank is None
 
 
-def test_slurm_profile_launches_ranks_with_srun(monkeypatch):
+def test_slurm_profile_leaves_the_launcher_to_the_job_and_polls_with_squeue(monkeypatch):
+    """The profile forces no launcher (each job picks and checks one at start-up: srun --mpi=pmix
+    where SLURM offers pmix, else mpirun) and asks squeue for job states, which works without an
+    accounting database too (benchmarks/measured/slurm.md)."""
     profile = yaml.safe_load((ROOT / "profiles/slurm/config.yaml").read_text())
     assert profile["executor"] == "slurm" and profile["rerun-incomplete"] is True
-    assert "export SPREADMAP_MPI_LAUNCHER=srun" in profile["precommand"]
-    monkeypatch.setenv("SPREADMAP_MPI_LAUNCHER", "srun")
-    assert mpi_command(32) == ["srun", "-n", "32"]
+    assert "SPREADMAP_MPI_LAUNCHER" not in profile.get("precommand", "")
+    assert profile["slurm-status-command"] == "squeue" and profile["retries"] >= 1
+    assert profile["slurm-init-seconds-before-status-checks"] <= 60
+    monkeypatch.setenv("SPREADMAP_MPI_LAUNCHER", "srun --mpi=pmix")
+    assert mpi_command(32) == ["srun", "--mpi=pmix", "-n", "32"]
     assert mpi_command(1) == []
     monkeypatch.delenv("SPREADMAP_MPI_LAUNCHER")
+    monkeypatch.delenv("SLURM_JOB_ID", raising=False)
     assert mpi_command(32)[:3] == ["mpirun", "-np", "32"]

@@ -15,6 +15,7 @@ runs an input file and prints its health as JSON.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import re
@@ -84,27 +85,156 @@ def check_seeds(text: str) -> list[int]:
     return values
 
 
-def mpi_command(ranks: int) -> list[str]:
+class MpiStartError(LiggghtsError):
+    """MPI could not start LIGGGHTS' ranks with the chosen launcher; the message names it and the fix."""
+
+
+MPI_FIX = ("set SPREADMAP_MPI_LAUNCHER to a launcher that starts MPI ranks at your site, e.g. "
+           "'srun --mpi=pmix' where `srun --mpi=list` shows pmix, or 'mpirun' "
+           "(on a cluster: in profiles/slurm's precommand, after any `module load`)")
+
+
+def launcher(ranks: int) -> tuple[list[str], str]:
+    """The MPI launcher for ``ranks`` ranks and where it came from, checked once per process.
+
+    1. ``SPREADMAP_MPI_LAUNCHER`` (read at each call; options split on whitespace,
+       e.g. ``"srun --mpi=pmix"``) when it is set;
+    2. inside a SLURM job (``SLURM_JOB_ID`` set): ``srun --mpi=pmix`` when SLURM offers
+       the pmix plugin (``srun --mpi=list``), else ``mpirun`` within the allocation,
+       whichever starts ``ranks`` ranks of LIGGGHTS first (:func:`check_launcher`);
+       plain ``srun`` is never chosen: Debian's Open MPI has no SLURM PMI support;
+    3. ``mpirun`` otherwise.
+
+    Returns ``(launcher and its options, source)``. Raises :class:`MpiStartError`
+    when, inside a SLURM job, no candidate starts.
+    """
+    override = os.environ.get("SPREADMAP_MPI_LAUNCHER", "").split()
+    if override:
+        return override, "SPREADMAP_MPI_LAUNCHER"
+    job = os.environ.get("SLURM_JOB_ID")
+    if not job:
+        return ["mpirun"], "default"
+    return list(_slurm_launcher(job, ranks)), f"chosen in SLURM job {job}"
+
+
+@functools.cache
+def _slurm_launcher(job: str, ranks: int) -> tuple[str, ...]:
+    candidates = [("srun", "--mpi=pmix")] if "pmix" in _srun_mpi_plugins() else []
+    candidates.append(("mpirun",))
+    failures = []
+    for candidate in candidates:
+        try:
+            check_launcher(list(candidate), ranks)
+            return candidate
+        except MpiStartError as err:
+            failures.append(f"'{' '.join(candidate)}': {err.reason}")
+    raise MpiStartError(f"MPI could not start {ranks} LIGGGHTS ranks in SLURM job {job}: tried "
+                        + "; ".join(failures) + f". Fix: {MPI_FIX}")
+
+
+def _srun_mpi_plugins() -> str:
+    """``srun --mpi=list``'s answer (the MPI plugins this SLURM offers), '' without srun."""
+    if shutil.which("srun") is None:
+        return ""
+    proc = subprocess.run(["srun", "--mpi=list"], capture_output=True, text=True, timeout=60)
+    return proc.stdout + proc.stderr
+
+
+def mpi_command(ranks: int, prefix: list[str] | None = None) -> list[str]:
     """The launcher prefix for ``ranks`` MPI ranks (none for one rank).
 
-    The launcher is the environment variable ``SPREADMAP_MPI_LAUNCHER``, read at
-    each call, default ``mpirun``; it may carry options, split on whitespace
-    (``"srun --mpi=pmix"``). Open MPI's ``mpirun`` or ``mpiexec`` gets ``-np N``,
-    plus ``--allow-run-as-root`` as root and ``--oversubscribe`` for more ranks
-    than cores. Any other launcher gets ``-n N``: ``srun`` inside a SLURM job
-    (``profiles/slurm`` sets it) starts the ranks on the job's nodes itself.
+    ``prefix`` is the launcher and its options (default: :func:`launcher`'s
+    choice). Open MPI's ``mpirun`` or ``mpiexec`` gets ``-np N``, plus
+    ``--allow-run-as-root`` as root and ``--oversubscribe`` for more ranks than
+    cores. Any other launcher gets ``-n N``: ``srun`` inside a SLURM job starts
+    the ranks on the job's nodes itself.
     """
     if ranks <= 1:
         return []
-    launcher = os.environ.get("SPREADMAP_MPI_LAUNCHER", "").split() or ["mpirun"]
-    if Path(launcher[0]).name not in ("mpirun", "mpiexec"):
-        return launcher + ["-n", str(ranks)]
-    cmd = launcher + ["-np", str(ranks)]
+    prefix = list(prefix) if prefix else launcher(ranks)[0]
+    if Path(prefix[0]).name not in ("mpirun", "mpiexec"):
+        return prefix + ["-n", str(ranks)]
+    cmd = prefix + ["-np", str(ranks)]
     if os.geteuid() == 0:
         cmd.append("--allow-run-as-root")
-    if ranks > (os.cpu_count() or 1):
+    if ranks > (os.cpu_count() or 1) and "SLURM_JOB_ID" not in os.environ:
         cmd.append("--oversubscribe")
     return cmd
+
+
+def launcher_env() -> dict:
+    """The environment for the launcher: inside a SLURM job, the allocation's node list
+    and tasks per node put back when they are missing.
+
+    snakemake-executor-plugin-slurm's job step removes every ``SLURM_*`` variable but
+    the job's id before it runs a rule, and Open MPI's ``mpirun`` then fails in its
+    SLURM allocation module; ``scontrol show job -d`` still knows the allocation.
+    """
+    env = dict(os.environ)
+    job = env.get("SLURM_JOB_ID")
+    if job and not env.get("SLURM_TASKS_PER_NODE") and shutil.which("scontrol"):
+        env.update(_allocation(job))
+    return env
+
+
+@functools.cache
+def _allocation(job: str) -> dict:
+    """``SLURM_NODELIST`` and ``SLURM_TASKS_PER_NODE`` (one task per allocated CPU) of ``job``."""
+    proc = subprocess.run(["scontrol", "show", "job", "-d", job], capture_output=True, text=True, timeout=60)
+    nodelist = re.search(r"^\s*NodeList=(\S+)", proc.stdout, re.MULTILINE)
+    per_node = []
+    for hosts, cpu_ids in re.findall(r"^\s*Nodes=(\S+) CPU_IDs=(\S+)", proc.stdout, re.MULTILINE):
+        cpus = sum(int(b) - int(a) + 1 if b else 1
+                   for a, b in re.findall(r"(\d+)(?:-(\d+))?", cpu_ids))
+        names = subprocess.run(["scontrol", "show", "hostnames", hosts], capture_output=True, text=True,
+                               timeout=60).stdout.split()
+        per_node.append(f"{cpus}(x{len(names)})" if len(names) > 1 else str(cpus))
+    if proc.returncode != 0 or not nodelist or not per_node:
+        return {}
+    return {"SLURM_NODELIST": nodelist.group(1), "SLURM_JOB_NODELIST": nodelist.group(1),
+            "SLURM_TASKS_PER_NODE": ",".join(per_node)}
+
+
+def check_launcher(prefix: list[str], ranks: int, timeout_s: float = 120) -> None:
+    """Start ``ranks`` ranks of LIGGGHTS with ``prefix`` on a one-line input; raise
+    :class:`MpiStartError` (its ``reason``: the telling line of the output) if they do not all run."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="spreadmap-mpi-check-") as tmp:
+        probe = Path(tmp) / "check.in"
+        probe.write_text('print "spreadmap-mpi-ok"\n')
+        cmd = mpi_command(ranks, prefix) + [LIGGGHTS, "-in", str(probe), "-log", "none"]
+        try:
+            proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True, timeout=timeout_s,
+                                  stdin=subprocess.DEVNULL, env=launcher_env())
+            out, code = proc.stdout + proc.stderr, proc.returncode
+        except FileNotFoundError:
+            out, code = f"{prefix[0]}: command not found", 127
+        except subprocess.TimeoutExpired:
+            out, code = f"no answer within {timeout_s:.0f} s", None
+    if code != 0 or out.count("spreadmap-mpi-ok") < 1:
+        err = MpiStartError(f"MPI could not start {ranks} LIGGGHTS ranks with '{' '.join(prefix)}': "
+                            f"{_mpi_reason(out)}. Fix: {MPI_FIX}")
+        err.reason = _mpi_reason(out)
+        raise err
+
+
+def _mpi_reason(output: str) -> str:
+    """The line of a failed MPI start that says why (SLURM's or Open MPI's own words)."""
+    known = {r"not built with SLURM's PMI":
+             "Open MPI was not built with SLURM's PMI support (plain srun cannot start it)",
+             r"not enough slots": "more ranks than the allocation's slots",
+             r"can not load PMIx library": "SLURM's pmix plugin cannot load the PMIx library (Debian: libpmix-dev)"}
+    for pattern, reason in known.items():
+        if re.search(pattern, output):
+            return reason
+    lines = [ln.strip(" *-") for ln in output.splitlines() if ln.strip(" *-")]
+    for pattern in (r"srun: error", r"lacks support",
+                    r"error", r"MPI_Init", r"not found"):
+        hit = next((ln for ln in lines if re.search(pattern, ln, re.IGNORECASE)), None)
+        if hit:
+            return hit
+    return lines[-1] if lines else "no output"
 
 
 def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str | Path | None = None) -> dict:
@@ -120,15 +250,25 @@ def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str |
                             "(or run the README's set-up command)")
     check_seeds(input_file.read_text())
     screen = log_file.with_name(log_file.name + ".screen")
-    cmd = mpi_command(ranks) + [LIGGGHTS, "-in", str(input_file), "-log", str(log_file)]
+    prefix, source = launcher(ranks) if ranks > 1 else ([], "")
+    if prefix:
+        _checked(tuple(prefix), ranks, source)
+    cmd = mpi_command(ranks, prefix) + [LIGGGHTS, "-in", str(input_file), "-log", str(log_file)]
     start, cpu_start = time.perf_counter(), children_cpu()
     with open(screen, "w") as out:
         proc = subprocess.run(cmd, cwd=cwd or input_file.parent, stdout=out, stderr=subprocess.STDOUT,
-                              stdin=subprocess.DEVNULL)
+                              stdin=subprocess.DEVNULL, env=launcher_env() if prefix else None)
     wall, cpu = time.perf_counter() - start, children_cpu() - cpu_start
     log_text = log_file.read_text(errors="replace") if log_file.exists() else ""
     screen_text = screen.read_text(errors="replace")
     error = _error_message(log_text + "\n" + screen_text)
+    if prefix and proc.returncode != 0 and "LIGGGHTS (Version" not in log_text:  # died before its first line
+        raise MpiStartError(f"MPI could not start {ranks} LIGGGHTS ranks with '{' '.join(prefix)}' ({source}): "
+                            f"{_mpi_reason(screen_text)}. Fix: {MPI_FIX}")
+    if "SIGINT/SIGTERM caught" in screen_text + log_text:  # LIGGGHTS' own handler: restart file, then exit 0
+        raise LiggghtsError(f"LIGGGHTS on {input_file.name} was stopped by SIGTERM or SIGINT (a time limit, "
+                            f"scancel or a kill) and quit before its end (exit code {proc.returncode}); "
+                            f"full log: {log_file}")
     if proc.returncode != 0 or error:
         where = _failing_command(log_text)
         tail = "\n".join(screen_text.strip().splitlines()[-8:])
@@ -141,7 +281,18 @@ def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str |
     parsed["wall_s"] = wall
     parsed["cpu_s"] = cpu
     parsed["ranks"] = ranks
+    parsed["launcher"] = " ".join(prefix)
     return parsed
+
+
+@functools.cache
+def _checked(prefix: tuple[str, ...], ranks: int, source: str) -> None:
+    """:func:`check_launcher` once per process for each launcher and rank count; the error names the source."""
+    try:
+        check_launcher(list(prefix), ranks)
+    except MpiStartError as err:
+        raise MpiStartError(str(err).replace(f"with '{' '.join(prefix)}'", f"with '{' '.join(prefix)}' ({source})",
+                                             1)) from None
 
 
 def children_cpu() -> float:

@@ -166,7 +166,8 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     health["strays_removed"] = strays
     health["heap_toe_m"] = float(atoms["x"].max() + atoms["radius"].max())
     summary = {"wall_s": log["wall_s"], "cpu_s": log["cpu_s"], "steps": int(log["thermo"]["Step"].iloc[-1]),
-               "timestep_s": s.timestep, "rayleigh_fraction": log["max_rayleigh_fraction"],
+               "mpi_launcher": log["launcher"], "timestep_s": s.timestep,
+               "rayleigh_fraction": log["max_rayleigh_fraction"],
                "hertz_fraction": log["max_hertz_fraction"], "inserted": log["inserted"], **peak, **health}
     _publish(out, summary, "settled.restart", "settled.dump")
     return summary
@@ -301,6 +302,10 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     _check_timestep(log, s)
     health = check_kinetic_energy(log, wall_speed=speed + abs(omega_rad_s) * s.roller_radius,
                                   squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
+    if not (out / "final.dump.part").is_file():
+        tail = "\n".join((out / "spread.log.screen").read_text(errors="replace").strip().splitlines()[-8:])
+        raise LiggghtsError(f"LIGGGHTS ended (exit 0, no ERROR line) without writing {out / 'final.dump.part'}; "
+                            f"last screen lines:\n{tail}")
     atoms = read_dump(out / "final.dump.part").atoms
     inside = through_roller(atoms, x0 + speed * travel_steps * s.timestep, context["roller_z"], s.roller_radius)
     if inside:
@@ -319,13 +324,15 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
     summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"], "cpu_s": log["cpu_s"],
                "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
-               "processors": context["processors"],
+               "mpi_launcher": log["launcher"], "processors": context["processors"],
                "roller_start_m": x0, "roller_travel_m": speed * travel_steps * s.timestep,
                "rayleigh_fraction": log["max_rayleigh_fraction"], "hertz_fraction": log["max_hertz_fraction"],
                "particle_steps_per_s": len(atoms) * (last - first) / log["wall_s"],
                **health}
     _publish(out, summary, "final.dump")
     shutil.rmtree(out / CHECKPOINT_DIR, ignore_errors=True)
+    for forced in out.glob("restart_forced_liggghts_*.data"):  # LIGGGHTS' own, written when a kill stopped it
+        forced.unlink()
     return summary
 
 
