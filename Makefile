@@ -27,7 +27,7 @@ map: setup
 
 test: setup
 	PYTHON=$(PYTHON) .ci/lint
-	$(PYTHON) -m pytest -n 2 --dist loadscope --no-loadscope-reorder -q tests
+	$(PYTHON) -m pytest -n 2 --dist loadscope --no-loadscope-reorder -q --durations=15 tests
 
 # The SLURM path on a real one-node cluster (root; about 70 min on 2 cores): benchmarks/measured/slurm.md
 bench-slurm: setup
