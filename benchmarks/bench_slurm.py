@@ -3,7 +3,7 @@
 Run from the repository root, as root, after ``apt-get install slurm-wlm munge libpmix-dev
 slurmdbd mariadb-server`` (Debian 12: SLURM 22.05.8)::
 
-    .venv/bin/python benchmarks/bench_slurm.py [--keep] [--scratch DIR] [--limit-point 70:-5]
+    .venv/bin/python benchmarks/bench_slurm.py [--keep] [--scratch DIR] [--limit-point 100:-5]
 
 1. **A failing job is seen**: on a one-node cluster with accounting (munge, MariaDB,
    slurmdbd, slurmctld, slurmd; :mod:`analysis.slurm_cluster`), a settle that cannot
@@ -139,7 +139,7 @@ def main(argv=None):
     parser.add_argument("--keep", action="store_true", help="keep the scratch folder")
     parser.add_argument("--scratch", type=Path, help="a scratch folder of an earlier run: the phases it "
                         "finished (its out.json) are not run again")
-    parser.add_argument("--limit-point", default="70:-5", help="U:omega of the time-limited spread (mm/s:rad/s); "
+    parser.add_argument("--limit-point", default="100:-5", help="U:omega of the time-limited spread (mm/s:rad/s); "
                         "it must need several minutes but fewer than about --limit-retries")
     parser.add_argument("--limit-checkpoints", type=int, default=20, help="its checkpoints_per_run")
     parser.add_argument("--limit-retries", type=int, default=8, help="Snakemake's --retries for it")
