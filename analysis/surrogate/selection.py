@@ -334,7 +334,7 @@ def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=No
                   "calibrated on the other runs' held-out residuals); *width* and *interval score* "
                   "(Gneiting & Raftery: width + 2/alpha x each miss; lower is better) in % of the "
                   f"mean metric; *own std covers*: runs inside mean +- {norm.ppf(0.5 + confidence / 2):.3g} x "
-                  "the model's own predictive std, uncalibrated (what the maps showed before). *n/a* width: "
+                  "the model's own predictive std, uncalibrated. *n/a* width: "
                   "too few held-out runs for a finite interval at this level (at least confidence/(1 - "
                   "confidence) are needed)."
                   + ("" if min_coverage is None else
