@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import itertools
 import json
 import math
 from dataclasses import dataclass
@@ -106,7 +107,13 @@ def _fail(key: str, value, why: str):
 
 
 def check_config(config: dict, base_dir: Path = Path(".")) -> None:
-    """Cross-key checks the schema cannot express."""
+    """Cross-key checks the schema cannot express, then the sweep's (:func:`check_sweep`)."""
+    check_physics(config, base_dir)
+    check_sweep(config, base_dir)
+
+
+def check_physics(config: dict, base_dir: Path = Path(".")) -> None:
+    """Cross-key checks of the physics, scene and fidelity sections (one set of values)."""
     level = config["level"]
     if level not in config["fidelity"]:
         _fail("level", level, f"no such fidelity level; choose one of {sorted(config['fidelity'])}")
@@ -153,16 +160,134 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
         if lvl["sampling_start_mm"] < lvl["heap_length_mm"]:
             _fail(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
                   f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")
-    points = design_points(config)
-    names = [run_name(U, w, 0) for U, w in points]
+
+
+def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
+    """The sweep's own checks: its axes name sweepable keys (:func:`check_axis_key`), each
+    value of an axis and each combination of the swept values passes the schema and
+    :func:`check_physics` as if written in its place, a gap reuses the heap settled
+    under ``roller.gap_um`` only where it fits, and run folders are unique.
+
+    A bad swept value raises :class:`ConfigError` naming ``sweep.<axis>`` and the value."""
+    sweep, axes = config["sweep"], sweep_axes(config)
+    for axis in axes:
+        check_axis_key(config, axis)
+    if sweep.get("points") and sweep.get("points_mm_s_rad_s"):
+        _fail("sweep.points", "...", "and sweep.points_mm_s_rad_s are both given: keep one")
+    if axes and sweep.get("points_mm_s_rad_s"):
+        _fail("sweep.points_mm_s_rad_s", sweep["points_mm_s_rad_s"],
+              f"gives (U, omega) only, but the sweep also has {', '.join(axes)}: list the points "
+              "over all axes in sweep.points")
+    for i, point in enumerate(sweep.get("points") or []):
+        if set(point) != {*SPEED_AXES, *axes}:
+            _fail(f"sweep.points[{i}]", point, f"must name exactly {', '.join([*SPEED_AXES, *axes])}"
+                  + ("" if axes else " (list an extra axis' values in sweep as well: its range)"))
+    for axis in axes:                       # each value alone: the message names the axis
+        for value in sweep[axis]:
+            _check_variant(config, {axis: value}, base_dir, f"sweep.{axis}", value)
+    for values in variants(config):         # and every combination run (cross-key facts between axes)
+        if len(values) > 1:
+            _check_variant(config, values, base_dir, "sweep", values)
+    gap = config["roller"]["gap_um"]
+    for value in sweep.get("roller.gap_um", []):
+        if value < gap:
+            _fail("sweep.roller.gap_um", value,
+                  f"is below roller.gap_um = {gap!r}, the gap the heap is settled and the substrate's peaks "
+                  f"are capped under (at {PEAK_CAP:g} x) for every swept gap: set roller.gap_um to the "
+                  "smallest swept gap")
+        spread, heap_box = scene(resolve(config, {"roller.gap_um": value})), scene(config).box
+        if spread.box[1] > heap_box[1] or spread.roller_gap + 2 * spread.roller_radius > heap_box[5]:
+            _fail("sweep.roller.gap_um", value,
+                  f"puts the roller or its feed outside the simulation box of the heap settled at "
+                  f"roller.gap_um = {gap!r} (the spread starts from its restart): sweep gaps closer to it")
+    runs = sweep_runs(config)
+    names = [run.name for run in runs]
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
-        _fail("sweep.points_mm_s_rad_s", config["sweep"]["points_mm_s_rad_s"],
-              f"lists the same run folder twice: {', '.join(repeated)}")
-    n_points = len(points)
+        key = "sweep.points" if sweep.get("points") else "sweep.points_mm_s_rad_s" \
+            if sweep.get("points_mm_s_rad_s") else "sweep"
+        _fail(key, sweep.get(key.split(".", 1)[-1]) if key != "sweep" else axes,
+              f"lists the same run folder twice: {', '.join(repeated[:3])}")
+    n_points = len(sweep_points(config))
     if config["surrogate"]["n_test"] > n_points - 3:
         _fail("surrogate.n_test", config["surrogate"]["n_test"],
-              f"leaves fewer than 3 of the sweep's {n_points} (U, omega) points to train on")
+              f"leaves fewer than 3 of the sweep's {n_points} points to train on")
+
+
+def _check_variant(config: dict, values: dict, base_dir: Path, key: str, shown) -> None:
+    """Schema and :func:`check_physics` on ``config`` with ``values`` in place; a failure
+    names ``key`` = ``shown`` and what is wrong, in one line."""
+    resolved = resolve(config, values)
+    resolved["sweep"] = {k: v for k, v in resolved["sweep"].items() if k not in values}
+    try:
+        check_finite(resolved)
+        validate_schema(resolved)
+        check_physics(resolved, base_dir)
+    except ConfigError as err:
+        where = "in its place" if len(values) == 1 else "in that combination"
+        raise ConfigError(f"config key {key!r} = {shown!r}: {where}, {err}") from None
+
+
+#: The sweep's keys that are not extra axes.
+SWEEP_KEYS = ("U_mm_s", "omega_rad_s", "replicates", "points_mm_s_rad_s", "points")
+
+#: The spreader's speeds: the two axes of every sweep (mm/s, rad/s).
+SPEED_AXES = ("U_mm_s", "omega_rad_s")
+
+#: Swept keys that the heap and the substrate do not depend on: their values share the
+#: settle (and geometry) of the config's own value. Every other axis settles its own heap.
+SPREAD_ONLY_AXES = ("roller.gap_um",)
+
+#: The generated substrate's peaks are clipped at this fraction of ``roller.gap_um``
+#: (3.4 Sq at the configured 300 um gap and Sq 79 um): otherwise the paper
+#: level's large field puts a node through the roller.
+PEAK_CAP = 0.9
+
+
+def sweep_axes(config: dict) -> list[str]:
+    """The sweep's extra axes: config keys by dotted path (``roller.gap_um``), in the order written."""
+    return [k for k in config["sweep"] if k not in SWEEP_KEYS]
+
+
+def check_axis_key(config: dict, axis: str) -> None:
+    """Raise :class:`ConfigError` unless ``axis`` is a numeric key a simulation computes with:
+    a key of ``material``, ``psd``, ``roller``, ``substrate`` or ``timestep``, or of the running
+    fidelity level but its execution keys; not a seed (``sweep.replicates`` varies those)."""
+    *path, last = axis.split(".")
+    level = config["level"]
+    if not path:
+        _fail(f"sweep.{axis}", config["sweep"][axis],
+              f"is not a sweep key; sweep other config keys by their dotted path, e.g. roller.gap_um "
+              f"(the sweep's own keys: {', '.join(SWEEP_KEYS)})")
+    section = path[0]
+    allowed = section in ("material", "psd", "roller", "substrate", "timestep") and len(path) == 1 or \
+        section == "fidelity" and len(path) == 2 and path[1] == level and last not in EXECUTION_KEYS
+    node = config
+    for key in [*path, last]:
+        node = node.get(key) if isinstance(node, dict) else None
+    numeric = isinstance(node, (int, float)) and not isinstance(node, bool)
+    if not allowed or not numeric or last.endswith("seed"):
+        why = ("is a seed: sweep.replicates varies the seeds" if last.endswith("seed") else
+               f"names fidelity level {path[1]!r}, but level is {level!r}"
+               if section == "fidelity" and len(path) == 2 and path[1] != level else
+               "is not a numeric config key a simulation computes with (material, psd, roller, substrate, "
+               f"timestep, or fidelity.{level} but its execution keys)")
+        _fail(f"sweep.{axis}", config["sweep"][axis], why)
+
+
+def resolve(config: dict, values: dict) -> dict:
+    """A copy of ``config`` with each dotted key of ``values`` set to its value
+    (the speeds, ``U_mm_s`` and ``omega_rad_s``, are not config keys and are left out)."""
+    out = copy.deepcopy(config)
+    for key, value in values.items():
+        if key in SPEED_AXES:
+            continue
+        *path, last = key.split(".")
+        node = out
+        for k in path:
+            node = node[k]
+        node[last] = value
+    return out
 
 
 #: Fidelity keys that say how a run is executed, not what it computes.
@@ -189,13 +314,112 @@ def run_name(U: float, omega: float, replicate: int) -> str:
     return f"U{U:g}_w{omega:g}_r{replicate}"
 
 
+def variant_path(values: dict) -> str:
+    """Folders of the extra axes' values, outer first: ``roller.gap_um=200/`` ('' for none)."""
+    return "".join(f"{k}={v:g}/" for k, v in values.items())
+
+
 def design_points(config: dict) -> list[tuple[float, float]]:
-    """The sweep's (U [mm/s], omega [rad/s]) points: ``sweep.points_mm_s_rad_s`` if given,
-    else the grid ``U_mm_s x omega_rad_s`` (U outer)."""
-    sweep = config["sweep"]
+    """The sweep's distinct (U [mm/s], omega [rad/s]) points, in order of first appearance:
+    ``sweep.points_mm_s_rad_s`` or ``sweep.points`` if given, else the grid ``U_mm_s x omega_rad_s``
+    (U outer)."""
+    return list(dict.fromkeys((p["U_mm_s"], p["omega_rad_s"]) for p in sweep_points(config)))
+
+
+def sweep_points(config: dict) -> list[dict]:
+    """Every point of the sweep over all its axes: ``{"U_mm_s": U, "omega_rad_s": omega,
+    <axis>: value, ...}`` (mm/s, rad/s, the axes' config units). ``sweep.points`` or
+    ``sweep.points_mm_s_rad_s`` if given, else the full grid: U outer, then omega, then
+    the extra axes (:func:`sweep_axes`) in the order written."""
+    sweep, axes = config["sweep"], sweep_axes(config)
     if sweep.get("points_mm_s_rad_s"):
-        return [(float(U), float(w)) for U, w in sweep["points_mm_s_rad_s"]]
-    return [(float(U), float(w)) for U in sweep["U_mm_s"] for w in sweep["omega_rad_s"]]
+        return [{"U_mm_s": float(U), "omega_rad_s": float(w)} for U, w in sweep["points_mm_s_rad_s"]]
+    if sweep.get("points"):
+        return [{k: float(p[k]) for k in (*SPEED_AXES, *axes)} for p in sweep["points"]]
+    grids = [sweep[k] for k in (*SPEED_AXES, *axes)]
+    return [dict(zip((*SPEED_AXES, *axes), map(float, combo))) for combo in itertools.product(*grids)]
+
+
+def variants(config: dict) -> list[dict]:
+    """The distinct combinations of the extra axes' values the sweep runs (``[{}]`` for none)."""
+    axes = sweep_axes(config)
+    seen = {tuple(p[a] for a in axes): None for p in sweep_points(config)}
+    return [dict(zip(axes, combo)) for combo in seen]
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run of the sweep: its speeds, replicate and extra axes' values, and where it lives."""
+    U: float                # mm/s
+    omega: float            # rad/s
+    replicate: int
+    values: tuple           # ((axis, value), ...) of the extra axes, in sweep order
+
+    @property
+    def name(self) -> str:
+        """Its folder under ``runs/``: ``U70_w-10_r0``, or ``roller.gap_um=200/U70_w-10_r0``."""
+        return variant_path(dict(self.values)) + run_name(self.U, self.omega, self.replicate)
+
+    @property
+    def heap(self) -> str:
+        """Its heap's (geometry's and settle's) folder: ``r0``, or the values of the axes the heap
+        depends on (all but :data:`SPREAD_ONLY_AXES`) before it: ``psd.mean_diameter_um=150/r0``."""
+        return variant_path(self.heap_values) + f"r{self.replicate}"
+
+    @property
+    def heap_values(self) -> dict:
+        """The extra axes' values its heap and substrate depend on."""
+        return {k: v for k, v in self.values if k not in SPREAD_ONLY_AXES}
+
+    @property
+    def point(self) -> dict:
+        """``{"U_mm_s": U, "omega_rad_s": omega, <axis>: value, ...}``."""
+        return {"U_mm_s": self.U, "omega_rad_s": self.omega, **dict(self.values)}
+
+
+def sweep_runs(config: dict) -> list[Run]:
+    """Every run: each point of :func:`sweep_points` times ``sweep.replicates``."""
+    axes = sweep_axes(config)
+    return [Run(p["U_mm_s"], p["omega_rad_s"], r, tuple((a, p[a]) for a in axes))
+            for p in sweep_points(config) for r in range(config["sweep"]["replicates"])]
+
+
+def run_config(config: dict, run: Run) -> dict:
+    """``config`` with the run's extra axes' values in place: what its spread computes with."""
+    return resolve(config, dict(run.values))
+
+
+def heap_config(config: dict, run: Run) -> dict:
+    """``config`` with the values its heap depends on in place: what its geometry and settle compute with
+    (a spread-only axis, e.g. the gap, keeps the config's own value)."""
+    return resolve(config, run.heap_values)
+
+
+def run_parameters(config: dict, run: Run) -> dict:
+    """Everything a run computes with, resolved (its extra axes' values in place), JSON/YAML-ready:
+    ``run`` (folder), ``U_mm_s``, ``omega_rad_s``, ``replicate``, ``swept`` (the extra axes'
+    values), ``heap`` (its settle's folder), ``level``, ``physics`` (the fingerprint Snakemake re-runs
+    on), and ``config``: the sections of :data:`SIMULATION_SECTIONS`, ``profilometer`` and the level's
+    ``fidelity`` keys."""
+    resolved, level = run_config(config, run), config["level"]
+    return {"run": run.name, "U_mm_s": run.U, "omega_rad_s": run.omega, "replicate": run.replicate,
+            "swept": dict(run.values), "heap": run.heap, "level": level,
+            "physics": simulation_fingerprint(resolved, level),
+            "config": {**{k: resolved[k] for k in (*SIMULATION_SECTIONS, "profilometer")},
+                       "fidelity": {level: resolved["fidelity"][level]}}}
+
+
+def runs_by_name(config: dict) -> dict[str, Run]:
+    """:func:`sweep_runs` by folder name (``Run.name``)."""
+    return {run.name: run for run in sweep_runs(config)}
+
+
+def heaps_by_name(config: dict) -> dict[str, Run]:
+    """The first run of each heap folder (``Run.heap``): what the geometry and settle of that heap need."""
+    table = {}
+    for run in sweep_runs(config):
+        table.setdefault(run.heap, run)
+    return table
 
 
 @dataclass(frozen=True)

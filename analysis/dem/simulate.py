@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.config import ConfigError, Scene, load_config, scene
+from analysis.config import PEAK_CAP, ConfigError, Scene, load_config, scene
 from analysis.dem import geometry
 from analysis.dem.health import (
     MAX_STRAYS,
@@ -51,12 +51,6 @@ from analysis.dem.liggghts import LiggghtsError, input_path, render, run
 from analysis.io import USER_ERRORS, error_line, write_json
 from analysis.metrics.dump import read_dump
 from analysis.physics import liggghts_seeds, roller_motion
-
-#: The generated substrate's peaks are clipped at this fraction of the roller's
-#: gap (3.4 Sq at the configured 300 um gap and Sq 79 um): otherwise the paper
-#: level's large field puts a node through the roller.
-PEAK_CAP = 0.9
-
 
 #: Length [m] over which the rough substrate ramps to flat outside the sampling region.
 ROUGH_TAPER = 0.5e-3
@@ -237,6 +231,10 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     if U_mm_s <= 0:
         raise ConfigError(f"spreader speed U = {U_mm_s} mm/s must be positive")
     speed = U_mm_s * 1e-3
+    peak = float(geometry.load_stl(meshes / "substrate.stl").vertices[:, 2].max())
+    if peak >= s.roller_gap:  # a swept gap spreads over the substrate made under roller.gap_um
+        raise ConfigError(f"config key 'roller.gap_um' = {s.roller_gap * 1e6:g}: the substrate's highest peak "
+                          f"({peak * 1e6:.0f} um) reaches the roller")
     atoms0 = read_dump(settled / "settled.dump").atoms
     x0 = roller_start(atoms0, s)
     if x0 - s.roller_radius <= s.box[0]:
@@ -253,7 +251,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     feeds = feed_plan(s, x0, speed, travel_steps, heap_toe)
     feed = None
     if feeds:
-        floor = float(geometry.load_stl(meshes / "substrate.stl").vertices[:, 2].max()) + max(s.diameters) / 2
+        floor = peak + max(s.diameters) / 2
         feed_seeds = liggghts_seeds(config["random_seed"] + 1000 * replicate + 500, len(s.diameters) + 1 + len(feeds))
         feed = {"mass": s.feed_pile_mass, "floor": floor, "template_seeds": feed_seeds[:len(s.diameters) + 1],
                 "seeds": dict(zip(feeds, feed_seeds[len(s.diameters) + 1:]))}
