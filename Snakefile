@@ -38,6 +38,7 @@ localrules:
     surrogate,
     maps,
     top_view,
+    run_parameters,
 
 
 rule all:
@@ -51,4 +52,5 @@ rule all:
         f"{OUT}/surrogate/grid.csv",
         f"{OUT}/maps",
         expand(f"{OUT}/runs/{{run}}/final.vtp", run=RUNS),
+        rules.run_parameters.output,
         TOP_VIEWS,

@@ -1,6 +1,18 @@
 # Shared by every rule file: the checked configuration, the fidelity level and the runs.
 from analysis.metrics.deposit import profile_runs as deposit_profile_runs
-from analysis.config import ConfigError, design_points, load_config, run_name, scene, simulation_fingerprint
+from analysis.config import (
+    ConfigError,
+    heap_config,
+    heaps_by_name,
+    load_config,
+    run_config,
+    run_name,
+    runs_by_name,
+    scene,
+    simulation_fingerprint,
+    sweep_runs,
+    variant_path,
+)
 
 try:  # the one check of the workflow's config (schema, then facts across keys); jobs trust it
     CONFIG = load_config(config, base_dir=workflow.basedir)
@@ -9,30 +21,56 @@ except ConfigError as err:
 
 LEVEL = CONFIG["level"]
 SCENE = scene(CONFIG, LEVEL)
-# Rule parameters that change when the physics of the level does: Snakemake then re-runs
-# the geometry, settle and spread (but not for MPI ranks or cluster limits).
-GEOMETRY_FINGERPRINT = simulation_fingerprint(CONFIG, LEVEL, sections=("roller", "substrate"))
-SIMULATION_FINGERPRINT = simulation_fingerprint(CONFIG, LEVEL)
+# Rule parameters (run_physics, heap_physics, heap_geometry below) change when the physics of a
+# run or heap does: Snakemake then re-runs its geometry, settle and spread (but not for MPI ranks
+# or cluster limits).
 PROFILOMETER = {**CONFIG["profilometer"], "lines": SCENE.profilometer_lines}
 OUT = f"results/{LEVEL}"
 LOGS = f"results/logs/{LEVEL}"
 BENCH = f"results/benchmarks/{LEVEL}"
 
 
-# The runs: the U x omega grid, or the explicit sweep.points_mm_s_rad_s (an off-grid design),
-# each with sweep.replicates heap packings; folders are named U{U:g}_w{omega:g}_r{rep}, so
-# a point already run under another design is reused.
-POINTS = design_points(CONFIG)
-RUNS = [run_name(U, w, r) for U, w in POINTS for r in range(CONFIG["sweep"]["replicates"])]
+# The runs: the U x omega grid (times every extra axis' values: sweep.<config key>), or the explicit
+# sweep.points (sweep.points_mm_s_rad_s), each with sweep.replicates heap packings. A run's folder is
+# U{U:g}_w{omega:g}_r{rep}, inside one folder per extra axis' value (roller.gap_um=200/...), so a
+# point already run under another design is reused; its heap (geometry and settle) is r{rep} inside
+# the folders of the axes the heap depends on (a gap reuses the heap settled at roller.gap_um).
+RUN_TABLE = runs_by_name(CONFIG)
+HEAP_TABLE = heaps_by_name(CONFIG)
+RUNS = list(RUN_TABLE)
+# Deposit profiles and top views: the runs of the first combination of the extra axes' values.
+_FIRST = sweep_runs(CONFIG)[0].values
+_PREFIX = variant_path(dict(_FIRST))
+POINTS = [(r.U, r.omega) for r in sweep_runs(CONFIG) if r.values == _FIRST and r.replicate == 0]
 # Deposit profiles: the middle U, the omegas nearest -10, 0, +10 rad/s, every replicate.
 PROFILE_RUNS = deposit_profile_runs(POINTS, CONFIG["sweep"]["replicates"])
 # Top views (the paper's Figure 4): the fastest U at the omegas nearest -5, 0, +5 rad/s.
 _U_MAX = max(U for U, _ in POINTS)
 _OMEGAS = sorted({min([w for U, w in POINTS if U == _U_MAX], key=lambda w: abs(w - t)) for t in (-5, 0, 5)})
-TOP_VIEWS = [f"{OUT}/top_views/{run_name(_U_MAX, w, 0)}.png" for w in _OMEGAS]
+TOP_VIEWS = [f"{OUT}/top_views/{_PREFIX}{run_name(_U_MAX, w, 0)}.png" for w in _OMEGAS]
+
+
+def run_physics(wildcards):
+    """The fingerprint of what a run's spread computes with (its extra axes' values in place)."""
+    return simulation_fingerprint(run_config(CONFIG, RUN_TABLE[wildcards.run]), LEVEL)
+
+
+def heap_physics(wildcards):
+    """The fingerprint of what a heap's settle computes with."""
+    return simulation_fingerprint(heap_config(CONFIG, HEAP_TABLE[wildcards.heap]), LEVEL)
+
+
+def heap_geometry(wildcards):
+    """The fingerprint of what a heap's geometry computes with."""
+    return simulation_fingerprint(heap_config(CONFIG, HEAP_TABLE[wildcards.heap]), LEVEL,
+                                  sections=("roller", "substrate"))
+
+
+def heap_of(wildcards):
+    """The heap folder a run starts from."""
+    return RUN_TABLE[wildcards.run].heap
 
 
 wildcard_constraints:
-    U=r"[0-9.e+-]+",
-    omega=r"-?[0-9.e+-]+",
-    rep=r"\d+",
+    run=r"([A-Za-z_.]+=[^/]+/)*U[0-9.e+-]+_w-?[0-9.e+-]+_r\d+",
+    heap=r"([A-Za-z_.]+=[^/]+/)*r\d+",

@@ -1,16 +1,16 @@
 rule geometry:
-    """Rough substrate (a new realisation per replicate, or the user's STL) and roller meshes of the level."""
+    """Rough substrate (a new realisation per replicate, or the user's STL) and roller meshes of one heap."""
     output:
-        substrate=f"{OUT}/meshes/r{{rep}}/substrate.stl",
-        roller=f"{OUT}/meshes/r{{rep}}/roller.stl",
-        roller_shell=f"{OUT}/meshes/r{{rep}}/roller_shell.stl",
-        summary=f"{OUT}/meshes/r{{rep}}/geometry.json",
+        substrate=f"{OUT}/meshes/{{heap}}/substrate.stl",
+        roller=f"{OUT}/meshes/{{heap}}/roller.stl",
+        roller_shell=f"{OUT}/meshes/{{heap}}/roller_shell.stl",
+        summary=f"{OUT}/meshes/{{heap}}/geometry.json",
     log:
-        f"{LOGS}/geometry/r{{rep}}.log",
+        f"{LOGS}/geometry/{{heap}}.log",
     benchmark:
-        f"{BENCH}/geometry/r{{rep}}.tsv"
+        f"{BENCH}/geometry/{{heap}}.tsv"
     params:
         level=LEVEL,
-        physics=GEOMETRY_FINGERPRINT,
+        physics=heap_geometry,
     script:
         "../scripts/geometry.py"

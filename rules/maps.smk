@@ -20,12 +20,12 @@ rule top_view:
         rules.spread.output.dump,
     output:
         report(
-            f"{OUT}/top_views/U{{U}}_w{{omega}}_r{{rep}}.png", caption="../report/top_view.rst", category="Top views"
+            f"{OUT}/top_views/{{run}}.png", caption="../report/top_view.rst", category="Top views"
         ),
     log:
-        f"{LOGS}/top_view/U{{U}}_w{{omega}}_r{{rep}}.log",
+        f"{LOGS}/top_view/{{run}}.log",
     benchmark:
-        f"{BENCH}/top_view/U{{U}}_w{{omega}}_r{{rep}}.tsv"
+        f"{BENCH}/top_view/{{run}}.tsv"
     params:
         region=SCENE.sampling_region,
     script:

@@ -2,14 +2,14 @@ rule layer_metrics:
     """The paper's eqs. 1-7 from the final dump, by the virtual profilometer; the layer as VTK for ParaView."""
     input:
         dump=rules.spread.output.dump,
-        substrate=rules.geometry.output.substrate,
+        substrate=lambda wc: f"{OUT}/meshes/{heap_of(wc)}/substrate.stl",
     output:
-        metrics=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/metrics.json",
-        vtk=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/final.vtp",  # here, not in a rule of its own: one Python start per run
+        metrics=f"{OUT}/runs/{{run}}/metrics.json",
+        vtk=f"{OUT}/runs/{{run}}/final.vtp",  # here, not in a rule of its own: one Python start per run
     log:
-        f"{LOGS}/metrics/U{{U}}_w{{omega}}_r{{rep}}.log",
+        f"{LOGS}/metrics/{{run}}.log",
     benchmark:
-        f"{BENCH}/metrics/U{{U}}_w{{omega}}_r{{rep}}.tsv"
+        f"{BENCH}/metrics/{{run}}.tsv"
     params:
         level=LEVEL,
         profilometer=PROFILOMETER,
@@ -48,7 +48,7 @@ rule trends:
 rule deposit_profile:
     """Layer mass along the travel for a few omegas, sampling region shaded: is the region in steady state?"""
     input:
-        [f"{OUT}/runs/{run_name(U, w, r)}/final.dump" for U, w, r in PROFILE_RUNS],
+        [f"{OUT}/runs/{_PREFIX}{run_name(U, w, r)}/final.dump" for U, w, r in PROFILE_RUNS],
     output:
         csv=f"{OUT}/deposit_profile.csv",
         png=report(f"{OUT}/deposit_profile.png", caption="../report/deposit_profile.rst", category="Dataset"),

@@ -1,15 +1,15 @@
 rule settle:
-    """Insert the heap and let it come to rest, once per replicate; every run starts here."""
+    """Insert the heap and let it come to rest, once per replicate and heap-changing value; runs start here."""
     input:
         substrate=rules.geometry.output.substrate,
     output:
-        restart=f"{OUT}/settle/r{{rep}}/settled.restart",
-        dump=f"{OUT}/settle/r{{rep}}/settled.dump",
-        health=f"{OUT}/settle/r{{rep}}/health.json",
+        restart=f"{OUT}/settle/{{heap}}/settled.restart",
+        dump=f"{OUT}/settle/{{heap}}/settled.dump",
+        health=f"{OUT}/settle/{{heap}}/health.json",
     log:
-        f"{LOGS}/settle/r{{rep}}.log",
+        f"{LOGS}/settle/{{heap}}.log",
     benchmark:
-        f"{BENCH}/settle/r{{rep}}.tsv"
+        f"{BENCH}/settle/{{heap}}.tsv"
     threads: SCENE.mpi_ranks
     resources:
         mpi=SCENE.mpi_ranks if SCENE.mpi_ranks > 1 else None,  # SLURM plugin: mpi means tasks > 1
@@ -19,25 +19,25 @@ rule settle:
         mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
     params:
         level=LEVEL,
-        physics=SIMULATION_FINGERPRINT,
+        physics=heap_physics,
     script:
         "../scripts/settle.py"
 
 
 rule spread:
-    """One spreading pass at U [mm/s] and omega [rad/s] from the settled heap."""
+    """One spreading pass at U [mm/s] and omega [rad/s] (and the run's extra axes' values) from its settled heap."""
     input:
-        substrate=rules.geometry.output.substrate,
-        roller_shell=rules.geometry.output.roller_shell,
-        restart=f"{OUT}/settle/r{{rep}}/settled.restart",
-        settled=f"{OUT}/settle/r{{rep}}/settled.dump",
+        substrate=lambda wc: f"{OUT}/meshes/{heap_of(wc)}/substrate.stl",
+        roller_shell=lambda wc: f"{OUT}/meshes/{heap_of(wc)}/roller_shell.stl",
+        restart=lambda wc: f"{OUT}/settle/{heap_of(wc)}/settled.restart",
+        settled=lambda wc: f"{OUT}/settle/{heap_of(wc)}/settled.dump",
     output:
-        dump=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/final.dump",
-        health=f"{OUT}/runs/U{{U}}_w{{omega}}_r{{rep}}/health.json",
+        dump=f"{OUT}/runs/{{run}}/final.dump",
+        health=f"{OUT}/runs/{{run}}/health.json",
     log:
-        f"{LOGS}/spread/U{{U}}_w{{omega}}_r{{rep}}.log",
+        f"{LOGS}/spread/{{run}}.log",
     benchmark:
-        f"{BENCH}/spread/U{{U}}_w{{omega}}_r{{rep}}.tsv"
+        f"{BENCH}/spread/{{run}}.tsv"
     threads: SCENE.mpi_ranks
     resources:
         mpi=SCENE.mpi_ranks if SCENE.mpi_ranks > 1 else None,  # SLURM plugin: mpi means tasks > 1
@@ -47,6 +47,18 @@ rule spread:
         mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
     params:
         level=LEVEL,
-        physics=SIMULATION_FINGERPRINT,
+        physics=run_physics,
     script:
         "../scripts/spread.py"
+
+
+rule run_parameters:
+    """Each run's full resolved parameters (its extra axes' values in place), beside its results."""
+    output:
+        expand(f"{OUT}/runs/{{run}}/parameters.yaml", run=RUNS),
+    log:
+        f"{LOGS}/run_parameters.log",
+    params:
+        physics=[simulation_fingerprint(run_config(CONFIG, run), LEVEL) for run in RUN_TABLE.values()],
+    script:
+        "../scripts/run_parameters.py"

@@ -1,6 +1,6 @@
 """Snakemake entry: the paper's layer metrics (eqs. 1-7) of one run, and its final state as VTK."""
 
-from analysis.config import scene
+from analysis.config import run_config, runs_by_name, scene
 from analysis.io import write_json
 from analysis.metrics.dump import read_dump
 from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
@@ -8,12 +8,11 @@ from analysis.rule import rule_context
 from analysis.viz.views import write_vtk
 
 with rule_context(snakemake) as config:
-    s = scene(config, snakemake.params.level)
-    U = float(snakemake.wildcards.U)
+    run = runs_by_name(config)[snakemake.wildcards.run]
+    s = scene(run_config(config, run), snakemake.params.level)
     frame = read_dump(snakemake.input.dump)
-    metrics = spread_layer_metrics(frame, s.sampling_region, U * 1e-3, s.density,
+    metrics = spread_layer_metrics(frame, s.sampling_region, run.U * 1e-3, s.density,
                                    substrate=snakemake.input.substrate, n_lines=s.profilometer_lines,
                                    seed=config["profilometer"]["seed"])
-    write_json({"U_mm_s": U, "omega_rad_s": float(snakemake.wildcards.omega),
-                "replicate": int(snakemake.wildcards.rep), **to_report_units(metrics)}, snakemake.output.metrics)
+    write_json({**run.point, "replicate": run.replicate, **to_report_units(metrics)}, snakemake.output.metrics)
     write_vtk(frame, snakemake.output.vtk)

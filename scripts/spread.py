@@ -1,10 +1,11 @@
-"""Snakemake entry: one spreading pass at the run's U [mm/s] and omega [rad/s]."""
+"""Snakemake entry: one spreading pass at the run's U [mm/s] and omega [rad/s], its extra axes' values in place."""
 from pathlib import Path
 
+from analysis.config import run_config, runs_by_name
 from analysis.dem.simulate import spread
 from analysis.rule import rule_context
 
 with rule_context(snakemake) as config:
-    w = snakemake.wildcards
-    spread(config, snakemake.params.level, float(w.U), float(w.omega), Path(snakemake.input.substrate).parent,
-           Path(snakemake.input.restart).parent, Path(snakemake.output.dump).parent, replicate=int(w.rep))
+    run = runs_by_name(config)[snakemake.wildcards.run]
+    spread(run_config(config, run), snakemake.params.level, run.U, run.omega, Path(snakemake.input.substrate).parent,
+           Path(snakemake.input.restart).parent, Path(snakemake.output.dump).parent, replicate=run.replicate)
