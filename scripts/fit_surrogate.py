@@ -36,6 +36,7 @@ with rule_context(snakemake):
     with atomic_path(out.split) as tmp:
         split_table(df, scores["split"]["train"], scores["split"]["test"]).to_csv(tmp, index=False)
     span = scores["input_range"]
-    grid = predict_grid(model, span["U_mm_s"], span["omega_rad_s"], snakemake.params.grid_points)
+    extra = {c: scores["swept"][c] for c in list(scores["inputs"])[2:]}  # at each swept value of the other axes
+    grid = predict_grid(model, span["U_mm_s"], span["omega_rad_s"], snakemake.params.grid_points, extra=extra)
     with atomic_path(out.grid) as tmp:
         grid.to_csv(tmp, index=False)

@@ -21,8 +21,32 @@ METRICS = {
 
 
 
-#: Input columns and their units.
+#: Input columns and their units: the spreader's speeds, in every dataset. A sweep's extra
+#: axes (config keys, ``sweep.<dotted key>``) are inputs too: columns named by their dotted
+#: path, after these (:func:`input_columns`).
 INPUTS = {"U_mm_s": "mm/s", "omega_rad_s": "rad/s"}
+
+#: Units of a config key, from its name's ending (the config's convention); none: dimensionless.
+_UNIT_SUFFIXES = {"_mm_s": "mm/s", "_rad_s": "rad/s", "_kg_m3": "kg/m^3", "_J_m3": "J/m^3", "_Pa": "Pa",
+                  "_mg_per_mm": "mg/mm", "_um": "um", "_mm": "mm", "_s": "s"}
+
+
+def input_columns(df) -> list[str]:
+    """The inputs of a dataset: ``U_mm_s``, ``omega_rad_s``, then its swept config keys
+    (the columns whose name is a dotted path, e.g. ``roller.gap_um``), in column order."""
+    return [*INPUTS, *(c for c in df.columns if "." in str(c))]
+
+
+def input_units(columns) -> dict:
+    """``{column: unit}`` of input columns, the unit read off the key's name (``gap_um``: um)."""
+    return {c: INPUTS.get(c) or next((u for end, u in _UNIT_SUFFIXES.items() if c.endswith(end)), "")
+            for c in columns}
+
+
+def point_label(point: dict) -> str:
+    """A point's short name: ``U70_w-10``, with the extra axes' values: ``U70_w-10_roller.gap_um=200``."""
+    extra = "".join(f"_{k}={v:g}" for k, v in point.items() if k not in INPUTS)
+    return f"U{point['U_mm_s']:g}_w{point['omega_rad_s']:g}{extra}"
 
 
 HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller",
@@ -47,7 +71,8 @@ def check_run(row: dict, level: str = "default", keep_supply_limited: bool = Fal
     :class:`SupplyLimitedError` naming ``fidelity.<level>.heap_particles``,
     unless ``keep_supply_limited`` (then the row is kept, marked by
     ``heap_exhausted`` = True, and an empty region is a measurement of no powder)."""
-    name = f"run U={row['U_mm_s']:g} mm/s, omega={row['omega_rad_s']:g} rad/s, replicate {row['replicate']}"
+    extra = "".join(f", {k}={v:g}" for k, v in row.items() if "." in k)
+    name = f"run U={row['U_mm_s']:g} mm/s, omega={row['omega_rad_s']:g} rad/s{extra}, replicate {row['replicate']}"
     if row["heap_exhausted"] and not keep_supply_limited:
         raise SupplyLimitedError(
             f"{name}: the heap ran dry before the end of the sampling region (supply-limited: M_s and Q_s "
@@ -84,35 +109,37 @@ def build_dataset(metrics_files, health_files, benchmark_files, out, level: str 
         row.update({"benchmark_cpu_s": float(b["cpu_time"]), "max_rss_MB": float(b["max_rss"])})
         check_run(row, level, keep_supply_limited)
         rows.append(row)
-    table = pd.DataFrame(rows).sort_values(["U_mm_s", "omega_rad_s", "replicate"], ignore_index=True)
+    table = pd.DataFrame(rows)
+    table = table.sort_values([*input_columns(table), "replicate"], ignore_index=True)
     with atomic_path(out) as tmp:
         table.to_csv(tmp, index=False)
     return table
 
 
 def point_groups(df):
-    """Label of each run's (U, omega) point, numbered in order of first appearance.
+    """Label of each run's point (U, omega and any extra axes), numbered in order of first appearance.
 
-    Replicates (runs at the same speeds from different heap packings) share a
+    Replicates (runs at the same inputs from different heap packings) share a
     label; with one run per point the labels are ``0 .. n-1`` in row order.
 
     Parameters
     ----------
     df : pandas.DataFrame
-        Has ``U_mm_s`` (mm/s) and ``omega_rad_s`` (rad/s).
+        Has ``U_mm_s`` (mm/s), ``omega_rad_s`` (rad/s) and the extra axes' columns
+        (:func:`input_columns`).
 
     Returns
     -------
     numpy.ndarray of int, shape (n_runs,)
     """
-    keys = df[list(INPUTS)].to_numpy(float)
+    keys = df[input_columns(df)].to_numpy(float)
     _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     rank = np.argsort(np.argsort(first))
     return rank[inverse.ravel()]
 
 
 def point_means(df, split=None):
-    """One row per (U, omega) point: the replicate mean, std and count of each metric.
+    """One row per point (U, omega, extra axes): the replicate mean, std and count of each metric.
 
     Parameters
     ----------
@@ -125,18 +152,18 @@ def point_means(df, split=None):
     Returns
     -------
     points : pandas.DataFrame
-        In order of first appearance: ``U_mm_s``, ``omega_rad_s``,
+        In order of first appearance: ``U_mm_s``, ``omega_rad_s``, the extra axes,
         ``n_replicates``, the metric means (their column names) and
         ``<metric>_sd`` (seed-to-seed standard deviation, ddof 1; 0 for a
         single run), in the metrics' units.
     point_split : (array of int, array of int) or None
         Point positions of the training and test points.
     """
-    groups = point_groups(df)
-    frame = df[list(INPUTS) + list(METRICS)].assign(_point=groups)
+    groups, inputs = point_groups(df), input_columns(df)
+    frame = df[inputs + list(METRICS)].assign(_point=groups)
     grouped = frame.groupby("_point", sort=True)
-    points = grouped[list(INPUTS) + list(METRICS)].mean().reset_index(drop=True)
-    points.insert(2, "n_replicates", grouped.size().to_numpy())
+    points = grouped[inputs + list(METRICS)].mean().reset_index(drop=True)
+    points.insert(len(inputs), "n_replicates", grouped.size().to_numpy())
     sd = grouped[list(METRICS)].std(ddof=1).fillna(0.0).reset_index(drop=True)
     for m in METRICS:
         points[f"{m}_sd"] = sd[m].to_numpy()

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.io import atomic_path
-from analysis.metrics.dataset import INPUTS, METRICS, point_groups, point_means
+from analysis.metrics.dataset import METRICS, input_columns, point_groups, point_label, point_means
 
 #: Row label of the pooled summary in the noise-floor table.
 POOLED = "pooled"
@@ -51,11 +51,11 @@ def noise_floor(df):
     points, _ = point_means(df)
     rep = points[points["n_replicates"] >= 2].reset_index(drop=True)
     table = pd.DataFrame({
-        "point": [f"U{u:g}_w{w:g}" for u, w in rep[list(INPUTS)].to_numpy()],
-        "U_mm_s": rep["U_mm_s"], "omega_rad_s": rep["omega_rad_s"],
+        "point": [point_label(p) for p in rep[input_columns(df)].to_dict("records")],
+        **{c: rep[c] for c in input_columns(df)},
         "n_replicates": rep["n_replicates"]})
     dof = (rep["n_replicates"] - 1).to_numpy(float)
-    pooled = {"point": POOLED, "U_mm_s": np.nan, "omega_rad_s": np.nan,
+    pooled = {"point": POOLED, **{c: np.nan for c in input_columns(df)},
               "n_replicates": int(rep["n_replicates"].sum())}
     for m in METRICS:
         mean, sd = rep[m].to_numpy(float), rep[f"{m}_sd"].to_numpy(float)

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 from sklearn.model_selection import GroupKFold, GroupShuffleSplit, LeaveOneGroupOut
 
-from analysis.metrics.dataset import INPUTS, METRICS, point_groups
+from analysis.metrics.dataset import INPUTS, METRICS, input_columns, input_units, point_groups
 
 
 def split_runs(df, n_test, seed):
@@ -64,10 +64,11 @@ def point_folds(df, folds, seed):
 
 
 def split_table(df, train_idx, test_idx):
-    """The split as a table (for split.csv): row, U_mm_s, omega_rad_s, replicate/seed if present, set."""
+    """The split as a table (for split.csv): row, U_mm_s, omega_rad_s, the extra axes, replicate/seed if
+    present, set."""
     if len(train_idx) + len(test_idx) != len(df):
         raise ValueError("train and test rows do not cover the dataset")
-    table = df[[c for c in (*INPUTS, "replicate", "seed") if c in df.columns]].reset_index(drop=True)
+    table = df[[c for c in (*input_columns(df), "replicate", "seed") if c in df.columns]].reset_index(drop=True)
     table.insert(0, "row", np.arange(len(df)))
     table["set"] = "train"
     table.loc[np.asarray(test_idx), "set"] = "test"
@@ -84,17 +85,19 @@ def read_split(path, df):
         i.e. the split was made on another dataset.
     """
     table = pd.read_csv(path)
-    if len(table) != len(df) or not np.allclose(
-            table[list(INPUTS)].to_numpy(float), df[list(INPUTS)].to_numpy(float)):
-        raise ValueError(f"{path} does not match the dataset's runs (rows or speeds differ)")
+    inputs = input_columns(df)
+    if len(table) != len(df) or input_columns(table) != inputs or not np.allclose(
+            table[inputs].to_numpy(float), df[inputs].to_numpy(float)):
+        raise ValueError(f"{path} does not match the dataset's runs (rows, inputs or their values differ)")
     is_test = (table["set"] == "test").to_numpy()
     rows = table["row"].to_numpy()
     return np.sort(rows[~is_test]), np.sort(rows[is_test])
 
 
 def inputs_of(df):
-    """(n, 2) float array of U [mm/s] and omega [rad/s]."""
-    return df[list(INPUTS)].to_numpy(float)
+    """(n, k) float array of the inputs: U [mm/s], omega [rad/s], then the extra axes
+    (:func:`analysis.metrics.dataset.input_columns`, their config units)."""
+    return df[input_columns(df)].to_numpy(float)
 
 
 def targets_of(df):
@@ -102,14 +105,15 @@ def targets_of(df):
     return df[list(METRICS)].to_numpy(float)
 
 
-def _names():
-    """Input and metric columns with their units, for scores and metadata."""
-    return {"inputs": dict(INPUTS),
+def _names(df=None):
+    """Input (in model order: those of ``df``, default the speeds) and metric columns with their
+    units, for scores and metadata."""
+    return {"inputs": input_units(list(INPUTS) if df is None else input_columns(df)),
             "metrics": {m: {"symbol": s, "unit": u} for m, (s, u) in METRICS.items()}}
 
 
 def _check_dataset(df):
-    missing = [c for c in (*INPUTS, *METRICS) if c not in df.columns]
+    missing = [c for c in (*input_columns(df), *METRICS) if c not in df.columns]
     if missing:
         raise KeyError(f"dataset lacks columns: {', '.join(missing)}")
     bad = ~np.isfinite(np.c_[inputs_of(df), targets_of(df)]).all(axis=1)

@@ -48,7 +48,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from analysis.metrics.dataset import METRICS, point_groups
+from analysis.metrics.dataset import METRICS, input_columns, point_groups
 from analysis.surrogate.candidates import GPSurrogate
 
 #: The four metrics and the two products of the hybrid indices (throughput: Q_s M_s, defect: R_q Phi).
@@ -124,7 +124,7 @@ def relative_noise(df, n_restarts=0, random_state=0):
         rho = np.sqrt((rel ** 2).sum(axis=0) / dof)
         source = f"pooled seed-to-seed sd of {len(Y)} runs at {len(counts)} points (replicates)"
     else:
-        gp = GPSurrogate(n_restarts=n_restarts, random_state=random_state).fit(df[["U_mm_s", "omega_rad_s"]]
+        gp = GPSurrogate(n_restarts=n_restarts, random_state=random_state).fit(df[input_columns(df)]
                                                                                 .to_numpy(float), Y)
         rho = gp.noise_std_ / np.abs(Y).mean(axis=0)
         source = "Gaussian process white-noise term (one run per point)"

@@ -50,7 +50,7 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 from threadpoolctl import threadpool_limits
 
-from analysis.metrics.dataset import INPUTS, point_groups
+from analysis.metrics.dataset import input_columns, point_groups
 from analysis.surrogate.data import _check_dataset, _names, inputs_of, point_folds, split_runs, targets_of
 from analysis.surrogate.scores import _MAPE_NOTE, R_TARGET, _score_text, regression_scores
 
@@ -283,7 +283,7 @@ def fit_surrogate(df, params):
     scores = {
         "sklearn_version": sklearn.__version__,
         "n_runs": len(df),
-        **_names(),
+        **_names(df),
         "params": {**params, "n_init": int(params["n_init"])},
         "deviation_from_paper": deviation_from_paper(params),
         "fit": {"solver": params["solver"],
@@ -297,8 +297,8 @@ def fit_surrogate(df, params):
                   "by": "(U, omega) point: replicates of a point are never split",
                   "train": train.tolist(), "test": test.tolist()},
         "input_range": {c: [float(X[:, j].min()), float(X[:, j].max())]
-                        for j, c in enumerate(INPUTS)},
-        "swept": {c: np.unique(X[:, j]).tolist() for j, c in enumerate(INPUTS)},
+                        for j, c in enumerate(input_columns(df))},
+        "swept": {c: np.unique(X[:, j]).tolist() for j, c in enumerate(input_columns(df))},
         "train": regression_scores(Y[train], model.predict(X[train])),
         "test": regression_scores(Y[test], model.predict(X[test])),
         "cv": regression_scores(Y, Y_cv),

@@ -27,10 +27,11 @@ def save_surrogate(model, path, meta):
     meta : dict
         What to keep with it; pass the ``scores`` of :func:`fit_surrogate`
         (it holds the split, the input range and the parameters).  The
-        scikit-learn version and the input and metric names and units are
-        added (``sklearn_version``, ``inputs``, ``metrics``).
+        scikit-learn version is added (``sklearn_version``), and the input and
+        metric names and units (``inputs``, in the model's column order, and
+        ``metrics``) unless ``meta`` has them (default inputs: the speeds).
     """
-    meta = {**meta, "sklearn_version": sklearn.__version__, **_names()}
+    meta = {**_names(), **meta, "sklearn_version": sklearn.__version__}
     with atomic_path(path) as tmp:
         joblib.dump({"format": _FORMAT, "model": model, "meta": meta}, tmp)
 

@@ -52,7 +52,7 @@ def provides_std(model):
     return bool(getattr(model, "provides_std", False))
 
 
-def predict_with_std(model, U, omega):
+def predict_with_std(model, U, omega, extra=None):
     """Predicted metrics and their predictive standard deviation at the speeds.
 
     Parameters
@@ -61,6 +61,9 @@ def predict_with_std(model, U, omega):
         A fitted surrogate with :func:`provides_std`.
     U, omega : array_like, 1-D, same length
         Spreader translation speed (mm/s) and roller angular speed (rad/s).
+    extra : dict, optional
+        The values of the model's further inputs (swept config keys, their config units),
+        ``{axis: array or scalar}`` in the model's input order.
 
     Returns
     -------
@@ -77,33 +80,40 @@ def predict_with_std(model, U, omega):
     if not provides_std(model):
         raise ValueError(f"{type(model).__name__} gives no predictive standard deviation; "
                          "refit with a model of analysis.surrogate.selection (gp, mlp ensemble, trees)")
-    X = np.c_[np.asarray(U, float), np.asarray(omega, float)]
-    mean, std = model.predict(X, return_std=True)
+    mean, std = model.predict(_design(U, omega, extra), return_std=True)
     return np.asarray(mean, float), np.asarray(std, float)
 
 
-def predict_frame(model, U, omega, confidence=None):
+def _design(U, omega, extra=None):
+    """The (n, 2 + len(extra)) input array: U, omega, then the extra inputs (scalars broadcast)."""
+    U, omega = np.asarray(U, float), np.asarray(omega, float)
+    return np.column_stack([U, omega, *(np.broadcast_to(np.asarray(v, float), U.shape)
+                                        for v in (extra or {}).values())])
+
+
+def predict_frame(model, U, omega, confidence=None, extra=None):
     """Predict the metrics at the speeds ``U`` [mm/s] and ``omega`` [rad/s] (1-D, same length).
 
-    Returns a frame of the speeds and the four metrics; when the model gives a
-    predictive standard deviation (:func:`provides_std`), also
+    ``extra`` gives the model's further inputs (``{axis: array or scalar}``, the model's
+    input order, config units), when it has any. Returns a frame of the inputs and the
+    four metrics; when the model gives a predictive standard deviation (:func:`provides_std`), also
     ``<metric>_std`` columns in the metric's unit; when it gives calibrated intervals
     (:func:`provides_intervals`), their columns (:func:`analysis.surrogate.intervals.interval_frame`)
     at ``confidence`` (default: the model's level).
     """
-    U, omega = np.asarray(U, float), np.asarray(omega, float)
-    frame = pd.DataFrame({"U_mm_s": U, "omega_rad_s": omega})
+    X = _design(U, omega, extra)
+    frame = pd.DataFrame(X, columns=["U_mm_s", "omega_rad_s", *(extra or {})])
     if provides_std(model):
-        pred, std = predict_with_std(model, U, omega)
+        pred, std = predict_with_std(model, X[:, 0], X[:, 1], dict(zip(extra or {}, X[:, 2:].T)))
     else:
-        pred, std = model.predict(np.c_[U, omega]), None
+        pred, std = model.predict(X), None
     for j, m in enumerate(METRICS):
         frame[m] = pred[:, j]
     if std is not None:
         for j, m in enumerate(METRICS):
             frame[f"{m}_std"] = std[:, j]
     if provides_intervals(model):
-        frame = pd.concat([frame, interval_frame(model, np.c_[U, omega], confidence)], axis=1)
+        frame = pd.concat([frame, interval_frame(model, X, confidence)], axis=1)
     return frame
 
 
@@ -127,8 +137,8 @@ def hybrid_index_std(frame, maxima):
     return (product_std("throughput_mm2_s", "mass_g"), product_std("roughness_um", "porosity_pct"))
 
 
-def predict_grid(model, U_range, omega_range, n, confidence=None):
-    """Evaluate the surrogate on a regular n x n grid of spreader speeds.
+def predict_grid(model, U_range, omega_range, n, confidence=None, extra=None):
+    """Evaluate the surrogate on a regular n x n grid of spreader speeds (at each value of the extra inputs).
 
     Parameters
     ----------
@@ -142,11 +152,15 @@ def predict_grid(model, U_range, omega_range, n, confidence=None):
         Grid points per axis (>= 2).
     confidence : float, optional
         Coverage level of the intervals (default: the model's, config ``surrogate.confidence``).
+    extra : dict, optional
+        The model's further inputs, ``{axis: values}`` (config units, the model's input
+        order): the n x n grid is evaluated at every combination of their values.
 
     Returns
     -------
     pandas.DataFrame
-        n*n rows (U outer, omega inner): ``U_mm_s``, ``omega_rad_s``, the four
+        n*n rows per combination of the extra values (those outer, in order, then U,
+        then omega): ``U_mm_s``, ``omega_rad_s``, the extra inputs, the four
         metrics in their units, and the dimensionless ``throughput_index`` and
         ``defect_index`` (:func:`hybrid_indices`, maxima over this grid).  When
         the model gives a predictive standard deviation, also
@@ -159,9 +173,11 @@ def predict_grid(model, U_range, omega_range, n, confidence=None):
     """
     if int(n) < 2:
         raise ValueError(f"grid needs at least 2 points per axis, got {n}")
-    U, omega = np.meshgrid(np.linspace(*U_range, int(n)), np.linspace(*omega_range, int(n)),
-                           indexing="ij")
-    grid = predict_frame(model, U.ravel(), omega.ravel(), confidence)
+    extra = extra or {}
+    mesh = np.meshgrid(*(np.asarray(v, float) for v in extra.values()), np.linspace(*U_range, int(n)),
+                       np.linspace(*omega_range, int(n)), indexing="ij")
+    *values, U, omega = (a.ravel() for a in mesh)
+    grid = predict_frame(model, U, omega, confidence, dict(zip(extra, values)))
     maxima = metric_maxima(grid)
     grid["throughput_index"], grid["defect_index"] = hybrid_indices(grid, maxima)
     if provides_std(model):

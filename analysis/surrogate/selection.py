@@ -38,7 +38,7 @@ from joblib import Parallel, delayed
 from scipy.stats import norm
 
 from analysis.io import atomic_path
-from analysis.metrics.dataset import METRICS, point_groups
+from analysis.metrics.dataset import METRICS, input_columns, point_groups
 from analysis.surrogate.candidates import CANDIDATES, GPSurrogate, make_candidate
 from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, targets_of
 from analysis.surrogate.intervals import (
@@ -157,7 +157,7 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
         ``fit_s`` (the scheme's fits, summed over its folds), ``convergence_warnings``.
     predictions : pandas.DataFrame
         Only with ``return_predictions``: one row per (model, scheme, repeat, run):
-        ``row`` (position in df), U_mm_s, omega_rad_s, the held-out prediction of each
+        ``row`` (position in df), the inputs (U_mm_s, omega_rad_s, extra axes), the held-out prediction of each
         metric and its ``<metric>_std`` (the fold model's std of its mean).
     """
     p = params
@@ -204,8 +204,8 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
                 frame.insert(0, "repeat", r)
                 frame.insert(0, "scheme", scheme)
                 frame.insert(0, "model", name)
-                frame.insert(4, "U_mm_s", X[:, 0])
-                frame.insert(5, "omega_rad_s", X[:, 1])
+                for j, c in enumerate(input_columns(df)):
+                    frame.insert(4 + j, c, X[:, j])
                 held_out.append(frame)
             if log:
                 block = rows[-len(METRICS):]
@@ -373,7 +373,7 @@ def fit_chosen(df, params, name, train_idx=None):
     model : fitted estimator with ``predict(X, return_std=True)``
     info : dict
         JSON-ready: ``name``, ``description``, ``fit_time_s``, ``n_train``,
-        and for the GP the fitted length scales (mm/s, rad/s) and noise std
+        and for the GP the fitted length scales (per input, its units) and noise std
         per metric.
     """
     X, Y = inputs_of(df), targets_of(df)
@@ -386,7 +386,7 @@ def fit_chosen(df, params, name, train_idx=None):
             "fit_time_s": round(time.perf_counter() - t0, 3),
             "convergence_warnings": messages}
     if isinstance(model, GPSurrogate):
-        info["length_scale"] = {m: {"U_mm_s": float(ls[0]), "omega_rad_s": float(ls[1])}
+        info["length_scale"] = {m: {c: float(v) for c, v in zip(input_columns(df), ls)}
                                 for m, ls in zip(METRICS, model.length_scales_)}
         info["noise_std"] = {m: float(s) for m, s in zip(METRICS, model.noise_std_)}
     return model, info
