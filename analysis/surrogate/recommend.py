@@ -3,10 +3,12 @@
 Usage::
 
     python -m analysis.surrogate.recommend --max-porosity 45 [--max-roughness 60] [--confidence 0.9] \\
-        [--model results/default/surrogate/model.joblib] [--grid-points 201]
+        [--model results/default/surrogate/model.joblib] [--grid-points 201] [--fix roller.gap_um=300] \\
+        [--axis-points 11]
 
-Prints the (U, omega) inside the swept range (stored with the model) whose
-predicted spread throughput Q_s is highest among the speeds that meet the
+Prints the (U, omega), and the value of every other swept axis (e.g. the gap,
+``roller.gap_um``), inside the swept range (stored with the model) whose
+predicted spread throughput Q_s is highest among the settings that meet the
 porosity (%) and, if given, roughness (um) limits, with the four predicted
 metrics and the calibrated interval a single new run of each would fall in
 (:mod:`analysis.surrogate.intervals`).  A setting qualifies when the upper end
@@ -14,7 +16,8 @@ of that interval meets each limit: with ``--confidence 0.9`` (default: the
 model's level, config ``surrogate.confidence``) at most about 5 % of runs at
 that setting exceed the limit (the interval is central: 5 % above, 5 % below).
 A model without calibrated intervals (an old model file) is judged on its
-mean, and says so.  Exit status: 0 found, 1 no speeds meet the limits (or
+mean, and says so.  ``--fix roller.gap_um=300`` holds an axis at a value (the gap
+the job needs; any input, within its swept range).  Exit status: 0 found, 1 no speeds meet the limits (or
 none at the confidence: the message says so), 2 bad input (the message names it).
 """
 
@@ -30,7 +33,7 @@ from analysis.io import USER_ERRORS, error_line
 from analysis.metrics.dataset import METRICS
 from analysis.surrogate.intervals import check_confidence
 from analysis.surrogate.persistence import load_surrogate
-from analysis.surrogate.predict import predict_grid, provides_intervals
+from analysis.surrogate.predict import predict_frame, provides_intervals
 
 DEFAULT_MODEL = "results/default/surrogate/model.joblib"
 
@@ -40,8 +43,60 @@ def _check_limit(name, value):
         raise ValueError(f"{name} must be a non-negative number, got {value}")
 
 
-def recommend(model, meta, max_porosity_pct, max_roughness_um=None, n=201, confidence=None):
-    """Speeds of highest predicted throughput whose single-run interval meets porosity and roughness limits.
+def search_grid(meta, n=201, fixed=None, axis_points=11):
+    """The settings a recommendation searches: every input's values over its swept range.
+
+    Parameters
+    ----------
+    meta : dict
+        The model's metadata: ``inputs`` (names and units, the model's order) and
+        ``input_range`` (``{input: [min, max]}``).
+    n : int
+        Points over the range of U and of omega (>= 2).
+    fixed : dict, optional
+        ``{input: value}`` held at that value (in the input's units; within its range).
+    axis_points : int
+        Points over the range of each other input (>= 2).
+
+    Returns
+    -------
+    dict
+        ``{input: 1-D array}`` in the model's input order (a regular grid's axes).
+
+    Raises
+    ------
+    ValueError
+        n or axis_points < 2, an unknown input, or a fixed value outside the swept range.
+    """
+    if "input_range" not in meta:
+        raise ValueError("the model's metadata has no swept range (input_range); refit it")
+    if int(n) < 2 or int(axis_points) < 2:
+        raise ValueError(f"grid needs at least 2 points per axis, got {n} and {axis_points}")
+    names = list(meta.get("inputs") or meta["input_range"])
+    fixed = dict(fixed or {})
+    unknown = sorted(set(fixed) - set(names))
+    if unknown:
+        raise ValueError(f"cannot fix {', '.join(unknown)}: the model's inputs are {', '.join(names)}")
+    axes = {}
+    for name in names:
+        lo, hi = meta["input_range"][name]
+        if name in fixed:
+            value = float(fixed[name])
+            if not lo - 1e-9 * max(1.0, abs(lo)) <= value <= hi + 1e-9 * max(1.0, abs(hi)):
+                raise ValueError(f"{name} = {value:g} lies outside the swept range {lo:g}..{hi:g}: "
+                                 "the surrogate would extrapolate")
+            axes[name] = np.array([value])
+        else:
+            axes[name] = np.linspace(lo, hi, int(n) if name in ("U_mm_s", "omega_rad_s") else int(axis_points))
+    return axes
+
+
+def recommend(model, meta, max_porosity_pct, max_roughness_um=None, n=201, confidence=None, fixed=None,
+              axis_points=11):
+    """Setting of highest predicted throughput whose single-run interval meets porosity and roughness limits.
+
+    Searches every swept input: U and omega, and any other axis the model has (e.g.
+    ``roller.gap_um``), each over its swept range, or held at a value (``fixed``).
 
     Parameters
     ----------
@@ -51,35 +106,41 @@ def recommend(model, meta, max_porosity_pct, max_roughness_um=None, n=201, confi
         the upper end of the single-run interval, otherwise to the mean.
     meta : dict
         Its metadata; ``meta["input_range"]`` gives the swept range
-        ``{"U_mm_s": [min, max], "omega_rad_s": [min, max]}``.
+        ``{"U_mm_s": [min, max], "omega_rad_s": [min, max], ...}``, ``meta["inputs"]``
+        the inputs in the model's order (default: the speeds).
     max_porosity_pct : float
         Highest acceptable porosity Phi of a run, %.
     max_roughness_um : float, optional
         Highest acceptable roughness R_q of a run, um.
     n : int
-        Grid points per axis over the swept range (resolution
+        Grid points per speed axis over the swept range (resolution
         (max - min)/(n - 1) per speed).
     confidence : float, optional
         Coverage of the central single-run interval, 0 < confidence < 1 (default:
         the model's level).  Ignored (reported as None) for a model without intervals.
+    fixed : dict, optional
+        ``{input: value}`` held fixed (the input's units), e.g. ``{"roller.gap_um": 300}``.
+    axis_points : int
+        Grid points over the range of each input other than the speeds.
 
     Returns
     -------
     dict or None
         None if no grid point meets the limits even on the mean prediction.
-        Otherwise ``U_mm_s``, ``omega_rad_s``, the four predicted metrics
+        Otherwise every input (``U_mm_s``, ``omega_rad_s``, and the other axes), the four predicted metrics
         (``mass_g``, ``throughput_mm2_s``, ``roughness_um``, ``porosity_pct``),
         their single-run interval ``<metric>_lo``, ``<metric>_hi`` (NaN without
         intervals), ``confidence`` (the level applied, or None), ``n_feasible``
         (grid points whose interval meets the limits), ``n_feasible_mean`` (on the
-        mean alone), ``n_grid`` and ``meets_confidence``: False when no setting's
-        interval meets the limits; the point returned is then the best on the mean alone.
+        mean alone), ``n_grid``, ``inputs`` (the input names) and ``meets_confidence``: False when no
+        setting's interval meets the limits; the point returned is then the best on the mean alone.
 
     Raises
     ------
     ValueError
         A negative or NaN limit, a confidence outside (0, 1) or too high for the
-        model's calibration runs, n < 2, or metadata without the swept range.
+        model's calibration runs, n < 2, metadata without the swept range, or a fixed
+        value that is not an input or lies outside its range.
     """
     _check_limit("max porosity (%)", max_porosity_pct)
     _check_limit("max roughness (um)", max_roughness_um)
@@ -94,10 +155,8 @@ def recommend(model, meta, max_porosity_pct, max_roughness_um=None, n=201, confi
                              f"most {model.n_runs / (model.n_runs + 1):.3g}, or more runs")
     else:
         confidence = None
-    if "input_range" not in meta:
-        raise ValueError("the model's metadata has no swept range (input_range); refit it")
-    grid = predict_grid(model, meta["input_range"]["U_mm_s"], meta["input_range"]["omega_rad_s"], n,
-                        confidence)
+    grid = _predict_search_grid(model, meta, n, fixed, axis_points, confidence)
+    names = list(search_grid(meta, 2, fixed, 2))
     for m in METRICS:
         for end in ("lo", "hi"):
             if f"{m}_{end}" not in grid:
@@ -114,16 +173,31 @@ def recommend(model, meta, max_porosity_pct, max_roughness_um=None, n=201, confi
         return None
     pool = on_interval if on_interval.any() else on_mean
     best = grid.loc[grid["throughput_mm2_s"].where(pool).idxmax()]
-    return {**{c: float(best[c]) for c in ("U_mm_s", "omega_rad_s", *METRICS)},
+    return {**{c: float(best[c]) for c in (*names, *METRICS)},
             **{f"{m}_{end}": float(best[f"{m}_{end}"]) for m in METRICS for end in ("lo", "hi")},
             "confidence": confidence, "meets_confidence": bool(on_interval.any()),
             "n_feasible": int(on_interval.sum()), "n_feasible_mean": int(on_mean.sum()),
-            "n_grid": len(grid)}
+            "n_grid": len(grid), "inputs": names}
 
 
-def _range_text(meta):
-    (u0, u1), (w0, w1) = meta["input_range"]["U_mm_s"], meta["input_range"]["omega_rad_s"]
-    return f"U {u0:g}..{u1:g} mm/s, omega {w0:g}..{w1:g} rad/s"
+def _predict_search_grid(model, meta, n, fixed, axis_points, confidence=None):
+    """Predictions over :func:`search_grid` (the other inputs outer, then U, then omega)."""
+    axes = search_grid(meta, n, fixed, axis_points)
+    speeds, others = ("U_mm_s", "omega_rad_s"), [a for a in axes if a not in ("U_mm_s", "omega_rad_s")]
+    mesh = np.meshgrid(*(axes[a] for a in (*others, *speeds)), indexing="ij")
+    flat = dict(zip((*others, *speeds), (m.ravel() for m in mesh)))
+    return predict_frame(model, flat["U_mm_s"], flat["omega_rad_s"], confidence, {a: flat[a] for a in others})
+
+
+def _range_text(meta, fixed=None):
+    fixed, units = fixed or {}, meta.get("inputs") or {}
+    names = {"U_mm_s": "U", "omega_rad_s": "omega"}
+    parts = []
+    for name, (lo, hi) in meta["input_range"].items():
+        unit = units.get(name) or {"U_mm_s": "mm/s", "omega_rad_s": "rad/s"}.get(name, "")
+        text = f"{fixed[name]:g}" if name in fixed else f"{lo:g}..{hi:g}"
+        parts.append(f"{names.get(name, name)} {text} {unit}".rstrip())
+    return ", ".join(parts)
 
 
 def _value(found, m, unit, fmt=".4g"):
@@ -132,7 +206,15 @@ def _value(found, m, unit, fmt=".4g"):
     return f"{found[m]:{fmt}} {unit}{interval}"
 
 
-def _report(found, meta, limits):
+def _setting_lines(found, meta):
+    """One line per input of the found setting."""
+    units = meta.get("inputs") or {}
+    lines = [f"  U     = {found['U_mm_s']:.1f} mm/s", f"  omega = {found['omega_rad_s']:.2f} rad/s"]
+    return lines + [f"  {name} = {found[name]:.4g} {units.get(name, '')}".rstrip()
+                    for name in found["inputs"] if name not in ("U_mm_s", "omega_rad_s")]
+
+
+def _report(found, meta, limits, fixed=None):
     if found["confidence"] is not None:
         level = f"{100 * found['confidence']:g} %"
         rule = (f"the upper end of the {level} single-run interval within each limit; a run: the "
@@ -141,10 +223,9 @@ def _report(found, meta, limits):
         rule = "the limits met by the predicted mean (this model has no calibrated intervals: refit it)"
     return "\n".join([
         f"Highest predicted throughput with {limits}",
-        f"(surrogate grid of {found['n_grid']} points over {_range_text(meta)}; "
+        f"(surrogate grid of {found['n_grid']} points over {_range_text(meta, fixed)}; "
         f"{found['n_feasible']} meet the limits; {rule}):",
-        f"  U     = {found['U_mm_s']:.1f} mm/s",
-        f"  omega = {found['omega_rad_s']:.2f} rad/s",
+        *_setting_lines(found, meta),
         f"  predicted: Q_s = {_value(found, 'throughput_mm2_s', 'mm^2/s')},",
         f"             M_s = {_value(found, 'mass_g', 'g')},",
         f"             R_q = {_value(found, 'roughness_um', 'um')},",
@@ -173,8 +254,14 @@ def main(argv=None):
                         help="coverage of the central single-run interval whose upper end must meet "
                              "each limit, between 0 and 1 (default: the model's, config "
                              "surrogate.confidence, e.g. 0.9)")
+    parser.add_argument("--fix", action="append", default=[], metavar="AXIS=VALUE",
+                        help="hold an input at a value in its units, e.g. roller.gap_um=300 (the gap the job "
+                             "needs) or U_mm_s=70; repeatable; default: every input over its swept range")
+    parser.add_argument("--axis-points", type=int, default=11, metavar="N",
+                        help="grid points over the range of each input other than the speeds (default 11)")
     args = parser.parse_args(argv)
     try:
+        fixed = _parse_fixed(args.fix)
         _check_limit("--max-porosity", args.max_porosity)
         _check_limit("--max-roughness", args.max_roughness)
         if args.confidence is not None and not 0 < args.confidence < 1:
@@ -188,31 +275,45 @@ def main(argv=None):
         except Exception as err:  # a corrupt or foreign file fails in many ways
             raise ValueError(f"cannot load model {args.model}: {err}") from err
         found = recommend(model, meta, args.max_porosity, args.max_roughness, args.grid_points,
-                          args.confidence)
+                          args.confidence, fixed, args.axis_points)
     except USER_ERRORS as err:
         parser.error(error_line(err))
     limits = f"porosity <= {args.max_porosity:g} %" + (
         "" if args.max_roughness is None else f" and roughness <= {args.max_roughness:g} um")
     if found is None:
-        grid = predict_grid(model, meta["input_range"]["U_mm_s"],
-                            meta["input_range"]["omega_rad_s"], args.grid_points)
-        print(f"No speeds in {_range_text(meta)} are predicted to meet {limits}; the lowest "
+        grid = _predict_search_grid(model, meta, args.grid_points, fixed, args.axis_points)
+        print(f"No speeds in {_range_text(meta, fixed)} are predicted to meet {limits}; the lowest "
               f"predicted porosity there is {grid['porosity_pct'].min():.4g} % and the lowest "
               f"roughness {grid['roughness_um'].min():.4g} um.")
         return 1
     if not found["meets_confidence"]:
         level = f"{100 * found['confidence']:g} %"
-        print(f"{found['n_feasible_mean']} speeds in {_range_text(meta)} are predicted to meet "
+        setting = ", ".join(line.strip() for line in _setting_lines(found, meta))
+        print(f"{found['n_feasible_mean']} settings in {_range_text(meta, fixed)} are predicted to meet "
               f"{limits} on the mean, but at none does the {level} single-run interval stay within "
               "the limits: runs there would exceed them too often. The best on the mean alone "
-              f"(U = {found['U_mm_s']:.1f} mm/s, omega = {found['omega_rad_s']:.2f} rad/s) has "
+              f"({setting}) has "
               f"Phi = {_value(found, 'porosity_pct', '%')}, "
               f"R_q = {_value(found, 'roughness_um', 'um')}, "
               f"Q_s = {_value(found, 'throughput_mm2_s', 'mm^2/s')}. Simulate near it, relax the "
               "limits, or lower --confidence.")
         return 1
-    print(_report(found, meta, limits))
+    print(_report(found, meta, limits, fixed))
     return 0
+
+
+def _parse_fixed(items):
+    """``["roller.gap_um=300", ...]`` as ``{"roller.gap_um": 300.0}``."""
+    fixed = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            fixed[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not np.isfinite(fixed[name.strip()]):
+            raise ValueError(f"--fix {item!r}: give AXIS=VALUE with a finite number, e.g. roller.gap_um=300")
+    return fixed
 
 
 if __name__ == "__main__":
