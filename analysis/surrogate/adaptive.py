@@ -57,7 +57,7 @@ import yaml
 from scipy.linalg import solve_triangular
 from scipy.stats import qmc
 
-from analysis.config import PROJECT_DIR, load_config, run_name
+from analysis.config import PROJECT_DIR, load_config, run_name, sweep_axes
 from analysis.io import USER_ERRORS, atomic_path, error_line
 from analysis.metrics.dataset import INPUTS, METRICS
 from analysis.surrogate.candidates import GPSurrogate
@@ -533,6 +533,10 @@ def main(argv=None):
                                                if k in config["adaptive"] and v is not None}}
         replicates = int(config["sweep"]["replicates"])
         check_settings(settings, replicates)
+        if sweep_axes(config):
+            raise ValueError(f"the adaptive design spans (U, omega) only; this sweep also has "
+                             f"{', '.join(sweep_axes(config))}: remove them from sweep (or fix their value in "
+                             "the config) to run it")
         if args.cores < 1:
             raise ValueError(f"--cores must be at least 1, got {args.cores}")
     except USER_ERRORS as err:  # ConfigError is a ValueError

@@ -27,8 +27,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from analysis.config import variant_path
 from analysis.io import atomic_path
-from analysis.metrics.dataset import INPUTS, METRICS, point_means
+from analysis.metrics.dataset import INPUTS, METRICS, input_columns, point_means
 from analysis.surrogate.data import inputs_of
 from analysis.surrogate.predict import (
     hybrid_indices,
@@ -380,8 +381,39 @@ def process_map_figure(model, df, split, n=101):
     return fig
 
 
+class HeldInputs:
+    """A fitted surrogate of more inputs than the speeds, seen over (U, omega) alone: its other
+    inputs (swept config keys) held at ``values`` (``{input: value}``, the model's order, config units).
+
+    ``predict``, ``half_widths`` and ``predict_interval`` take (n, 2) speeds; everything else
+    (``confidence``, ``is_finite``, ...) is the model's.
+    """
+
+    def __init__(self, model, values):
+        self.model, self.values = model, dict(values)
+
+    def _full(self, X):
+        X = np.asarray(X, float)
+        return np.column_stack([X, *(np.full(len(X), float(v)) for v in self.values.values())])
+
+    def predict(self, X, return_std=False):
+        return self.model.predict(self._full(X), return_std=True) if return_std else self.model.predict(self._full(X))
+
+    def half_widths(self, X, confidence=None):
+        return self.model.half_widths(self._full(X), confidence)
+
+    def predict_interval(self, X, confidence=None, kind="run"):
+        return self.model.predict_interval(self._full(X), confidence, kind)
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+
 def render_maps(model, df, split, outdir, n=41):
-    """Write every figure: surfaces, parity plots, process map (and uncertainty maps).
+    """Write every figure: surfaces, parity plots, process map (and uncertainty maps); with
+    inputs beyond the speeds (a sweep's extra axes), one set per combination of their swept
+    values, in ``<outdir>/<axis>=<value>/...`` (:func:`analysis.config.variant_path`), the
+    other inputs held there (:class:`HeldInputs`).
 
     Parameters
     ----------
@@ -401,7 +433,8 @@ def render_maps(model, df, split, outdir, n=41):
     Returns
     -------
     list of pathlib.Path
-        ``<metric>_surface.{png,svg}``, ``<metric>_parity.{png,svg}`` and,
+        ``<metric>_surface.{png,svg}``, ``<metric>_parity.{png,svg}`` (with extra axes: once,
+        over every point, in ``outdir``; the rest per slice) and,
         when the model gives calibrated intervals, ``<metric>_interval.{png,svg}`` per
         metric (metric = dataset column, e.g. ``mass_g``), then
         ``process_map.{png,svg}``.
@@ -409,14 +442,35 @@ def render_maps(model, df, split, outdir, n=41):
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     points, split = point_means(df, tuple(np.asarray(rows, int) for rows in split))
-    predicted = model.predict(inputs_of(points))
+    extra = input_columns(df)[len(INPUTS):]
+    if not extra:
+        return _render_slice(model, points, split, outdir, n, parity=model.predict(inputs_of(points)))
+    paths = []
+    with matplotlib.rc_context(_STYLE):     # parity plots: every point, once
+        predicted = model.predict(inputs_of(points))
+        for metric in METRICS:
+            paths += save_figure(parity_figure(points, predicted, split, metric), outdir, f"{metric}_parity")
+    for values, rows in points.groupby(extra, sort=True).indices.items():
+        values = dict(zip(extra, np.atleast_1d(values)))
+        in_slice = np.isin(np.arange(len(points)), rows)
+        sub_split = tuple(np.flatnonzero(np.isin(np.flatnonzero(in_slice), part)) for part in split)
+        sub = points[in_slice].reset_index(drop=True)
+        paths += _render_slice(HeldInputs(model, values), sub, sub_split, outdir / variant_path(values), n)
+    return paths
+
+
+def _render_slice(model, points, split, outdir, n, parity=None):
+    """The figures of :func:`render_maps` over (U, omega) for ``points`` into ``outdir``; the
+    parity plots too when given the predictions at the points (``parity``, shape (n, 4))."""
+    Path(outdir).mkdir(parents=True, exist_ok=True)
     paths = []
     with matplotlib.rc_context(_STYLE):
         for metric in METRICS:
             paths += save_figure(surface_figure(model, points, split, metric, n), outdir,
                                  f"{metric}_surface")
-            paths += save_figure(parity_figure(points, predicted, split, metric), outdir,
-                                 f"{metric}_parity")
+            if parity is not None:
+                paths += save_figure(parity_figure(points, parity, split, metric), outdir,
+                                     f"{metric}_parity")
             if provides_intervals(model):
                 paths += save_figure(interval_figure(model, points, split, metric, n), outdir,
                                      f"{metric}_interval")
