@@ -182,14 +182,16 @@ def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
         if set(point) != {*SPEED_AXES, *axes}:
             _fail(f"sweep.points[{i}]", point, f"must name exactly {', '.join([*SPEED_AXES, *axes])}"
                   + ("" if axes else " (list an extra axis' values in sweep as well: its range)"))
-    for axis in axes:                       # each value alone: the message names the axis
-        for value in sweep[axis]:
+    run = variants(config)
+    for axis in axes:                       # each value alone (listed or in sweep.points): the message names it
+        for value in dict.fromkeys([*sweep[axis], *(v[axis] for v in run)]):
             _check_variant(config, {axis: value}, base_dir, f"sweep.{axis}", value)
-    for values in variants(config):         # and every combination run (cross-key facts between axes)
+    for values in run:                      # and every combination run (cross-key facts between axes)
         if len(values) > 1:
             _check_variant(config, values, base_dir, "sweep", values)
     gap = config["roller"]["gap_um"]
-    for value in sweep.get("roller.gap_um", []):
+    for value in dict.fromkeys([*sweep.get("roller.gap_um", []), *(v["roller.gap_um"] for v in run
+                                                                    if "roller.gap_um" in v)]):
         if value < gap:
             _fail("sweep.roller.gap_um", value,
                   f"is below roller.gap_um = {gap!r}, the gap the heap is settled and the substrate's peaks "
