@@ -138,7 +138,7 @@ def test_a_bad_swept_value_stops_snakemake_before_any_job(tmp_path):
                            "--config", 'sweep={"psd.mean_diameter_um": [175, 90]}'],
                           capture_output=True, text=True)
     assert proc.returncode != 0
-    assert "'sweep.psd.mean_diameter_um' = 90" in proc.stderr
+    assert "'sweep.psd.mean_diameter_um' = 90" in proc.stdout + proc.stderr
     assert not (tmp_path / "results").exists()
 
 

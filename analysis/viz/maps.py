@@ -399,14 +399,11 @@ class HeldInputs:
     def predict(self, X, return_std=False):
         return self.model.predict(self._full(X), return_std=True) if return_std else self.model.predict(self._full(X))
 
-    def half_widths(self, X, confidence=None):
-        return self.model.half_widths(self._full(X), confidence)
-
-    def predict_interval(self, X, confidence=None, kind="run"):
-        return self.model.predict_interval(self._full(X), confidence, kind)
-
     def __getattr__(self, name):
-        return getattr(self.model, name)
+        attr = getattr(self.model, name)    # half_widths, predict_interval: only if the model has intervals
+        if name in ("half_widths", "predict_interval"):
+            return lambda X, *args, **kwargs: attr(self._full(X), *args, **kwargs)
+        return attr
 
 
 def render_maps(model, df, split, outdir, n=41):
