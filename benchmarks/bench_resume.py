@@ -17,8 +17,8 @@ At one point of the smoke level (``--ranks`` MPI ranks, ``--checkpoints`` checkp
 
 1. the straight run, and a second straight run (are repeats bit-identical?);
 2. ``--resumes`` runs of the same input, each stopped by SIGTERM to its process group (as
-   SLURM's time limit does) at a delay spread evenly over the straight run's wall time,
-   then rerun to its end (it resumes from its newest checkpoint);
+   SLURM's time limit does) right after its 1st, ..., last-but-one checkpoint (spread evenly),
+   then rerun to its end (it resumes from that checkpoint);
 3. ``--seeds`` more replicates (their own heap and substrate) run straight: the seed
    scatter at this very point.
 
@@ -43,6 +43,7 @@ import yaml
 from bench_layer_metrics import machine
 
 from analysis.config import load_config, scene
+from analysis.dem.simulate import CHECKPOINT_DIR
 from analysis.metrics.dataset import METRICS
 from analysis.metrics.dump import read_dump
 from analysis.metrics.noise_floor import pooled_seed_sd
@@ -65,16 +66,19 @@ def run_to_end(cmd, what):
     return time.perf_counter() - start
 
 
-def stopped_then_resumed(cmd, delay_s):
-    """Start ``cmd``, SIGTERM its process group after ``delay_s``, wait, then run it to its end."""
+def stopped_then_resumed(cmd, out, after_checkpoints):
+    """Start ``cmd``, SIGTERM its process group once ``out`` has written ``after_checkpoints``
+    checkpoints (a moment in the run that does not depend on how busy the machine is), wait,
+    then run it to its end: it resumes from that checkpoint."""
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    try:
-        proc.wait(timeout=delay_s)
-        stopped = False
-    except subprocess.TimeoutExpired:
+    seen = set()
+    while proc.poll() is None and len(seen) < after_checkpoints:
+        seen.update(p.name for p in (out / CHECKPOINT_DIR).glob("travel.*.restart"))
+        time.sleep(0.1)
+    stopped = proc.poll() is None
+    if stopped:
         os.killpg(proc.pid, signal.SIGTERM)
         proc.wait(timeout=120)
-        stopped = True
     return stopped, run_to_end(cmd, "resume")
 
 
@@ -95,7 +99,7 @@ def main():
     parser.add_argument("--checkpoints", type=int, default=20, help="checkpoints_per_run")
     parser.add_argument("--resumes", type=int, default=10)
     parser.add_argument("--seeds", type=int, default=4, help="replicates 1..N run straight (0: none)")
-    parser.add_argument("--scratch", type=Path)
+    parser.add_argument("--scratch", type=Path, help="a scratch folder of an earlier call: its finished runs are kept")
     parser.add_argument("--keep", action="store_true")
     args = parser.parse_args()
     U, omega = (float(v) for v in args.point.split(":"))
@@ -123,27 +127,40 @@ def main():
 
     rows = []
 
-    def record(kind, rep, run, wall, delay=np.nan, stopped=False):
-        row = {"kind": kind, "replicate": rep, "run": run.name, "stop_delay_s": delay, "stopped": stopped,
+    def done(run):
+        """The row of a run an earlier, interrupted call of this benchmark finished (``--scratch``)."""
+        saved = run / "bench_row.json"
+        if saved.is_file():
+            rows.append(json.loads(saved.read_text()))
+            return True
+        return False
+
+    def record(kind, rep, run, wall, after=np.nan, stopped=False):
+        row = {"kind": kind, "replicate": rep, "run": run.name, "stopped_after_checkpoint": after, "stopped": stopped,
                "wall_s": wall, **layer_metrics(config, run, scratch / f"meshes_r{rep}")}
         rows.append(row)
+        (run / "bench_row.json").write_text(json.dumps(row))
         print(f"{kind} {run.name}: " + ", ".join(f"{k} {row[k]:.4g}" for k in ["resumed_from_step", *METRICS]),
               flush=True)
 
     straight = scratch / "straight"
-    wall = run_to_end(spread_cmd(0, straight), "straight run")
-    record("straight", 0, straight, wall)
+    if not done(straight):
+        record("straight", 0, straight, run_to_end(spread_cmd(0, straight), "straight run"))
     again = scratch / "straight_again"
-    record("straight", 0, again, run_to_end(spread_cmd(0, again), "repeat"))
-    delays = wall * (0.1 + 0.8 * (np.arange(args.resumes) + 0.5) / args.resumes)
-    for i, delay in enumerate(delays):
+    if not done(again):
+        record("straight", 0, again, run_to_end(spread_cmd(0, again), "repeat"))
+    # stopped after checkpoint 1, 3, 5, ...: spread evenly over the travel
+    stops = np.round(1 + np.arange(args.resumes) * (args.checkpoints - 2) / max(args.resumes - 1, 1)).astype(int)
+    for i, after in enumerate(stops):
         out = scratch / f"resumed_{i}"
-        shutil.rmtree(out, ignore_errors=True)
-        stopped, wall_i = stopped_then_resumed(spread_cmd(0, out), delay)
-        record("resumed", 0, out, wall_i, delay, stopped)
+        if not done(out):
+            shutil.rmtree(out, ignore_errors=True)
+            stopped, wall_i = stopped_then_resumed(spread_cmd(0, out), out, after)
+            record("resumed", 0, out, wall_i, int(after), stopped)
     for rep in range(1, args.seeds + 1):
         out = scratch / f"seed_r{rep}"
-        record("seed", rep, out, run_to_end(spread_cmd(rep, out), f"replicate {rep}"))
+        if not done(out):
+            record("seed", rep, out, run_to_end(spread_cmd(rep, out), f"replicate {rep}"))
 
     df = pd.DataFrame(rows)
     ref_dump = (straight / "final.dump").read_bytes()
@@ -196,7 +213,7 @@ def report(df, args, scratch):
         "",
         "Per run (`resume.csv`):",
         "",
-        df[["kind", "run", "stop_delay_s", "resumed_from_step", "bit_identical", *METRICS]].to_markdown(
+        df[["kind", "run", "stopped_after_checkpoint", "resumed_from_step", "bit_identical", *METRICS]].to_markdown(
             index=False, floatfmt=".4g"),
         "",
     ]
