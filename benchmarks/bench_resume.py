@@ -40,14 +40,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import yaml
+from bench_fidelity import measure_layer
 from bench_layer_metrics import machine
 
-from analysis.config import load_config, scene
+from analysis.config import load_config
 from analysis.dem.simulate import CHECKPOINT_DIR
 from analysis.metrics.dataset import METRICS
-from analysis.metrics.dump import read_dump
 from analysis.metrics.noise_floor import pooled_seed_sd
-from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
 
 ROOT = Path(__file__).resolve().parents[1]
 LEVEL = "smoke"
@@ -83,13 +82,10 @@ def stopped_then_resumed(cmd, out, after_checkpoints):
 
 
 def layer_metrics(config_path, run, meshes):
-    config = load_config(config_path)
-    s = scene(config, LEVEL)
+    """The run's step counts and its four metrics (bench_fidelity's measure_layer)."""
     health = json.loads((run / "health.json").read_text())
-    m = spread_layer_metrics(read_dump(run / "final.dump"), s.sampling_region, health["U_mm_s"] * 1e-3, s.density,
-                             substrate=meshes / "substrate.stl", n_lines=s.profilometer_lines,
-                             seed=config["profilometer"]["seed"])
-    return {"steps": health["steps"], "resumed_from_step": health["resumed_from_step"], **to_report_units(m)}
+    return {"steps": health["steps"], "resumed_from_step": health["resumed_from_step"],
+            **measure_layer(load_config(config_path), LEVEL, run, meshes, health["U_mm_s"])}
 
 
 def main():
