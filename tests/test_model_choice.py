@@ -10,7 +10,7 @@ import pytest
 from conftest import synthetic_dataset, synthetic_metrics
 
 from analysis.metrics.dataset import METRICS, point_groups, point_means
-from analysis.metrics.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown
+from analysis.metrics.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown, two_run_tolerance
 from analysis.surrogate.candidates import GPSurrogate, MLPEnsemble, TreeEnsemble, make_candidate
 from analysis.surrogate.data import inputs_of, point_folds, split_runs, targets_of
 from analysis.surrogate.predict import predict_grid, predict_with_std
@@ -107,6 +107,18 @@ def test_noise_floor_recovers_the_known_noise():
         assert c["MAPE_floor_pct"] == pytest.approx(100 * rel * np.sqrt(2 / np.pi), rel=0.2), m
         assert 0 < c["R2_max"] < 1 and c["R_max"] == pytest.approx(np.sqrt(c["R2_max"]))
     assert re.search(r"^\| \*\*pooled\*\* +\| 180 +\|", noise_floor_markdown(table), re.M)
+
+
+def test_two_run_tolerance_is_k_sds_of_the_difference_of_two_runs():
+    # two independent runs of one point (a resumed run scatters about its twin as a new heap
+    # does): their difference exceeds k = 2 of its own sds 4.55 % of the time, k = 2 single-run
+    # sds 15.7 %
+    rng = np.random.default_rng(0)
+    sd = dict(zip(METRICS, [1e-4, 2.0, 5.0, 3.0]))
+    tolerance = two_run_tolerance(sd, k=2.0)
+    for m, s in sd.items():
+        d = rng.normal(0, s, 200_000) - rng.normal(0, s, 200_000)
+        assert np.mean(np.abs(d) > tolerance[m]) == pytest.approx(0.0455, abs=0.003), m
 
 
 def test_no_noise_floor_without_replicates(dataset):

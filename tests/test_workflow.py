@@ -18,12 +18,13 @@ from conftest import SMOKE_SEED_SD
 from PIL import Image
 
 from analysis.faults import campaign, compare_runs, half_written_files
+from analysis.metrics.noise_floor import two_run_tolerance
 from tests.test_config import ROOT
 
 TEST_CONFIG = yaml.safe_load((ROOT / ".test/config.yaml").read_text())
 OMEGAS = TEST_CONFIG["sweep"]["omega_rad_s"]
 FIRST_U = TEST_CONFIG["sweep"]["U_mm_s"]
-SEED_SPREAD = {m: 4 * sd for m, sd in SMOKE_SEED_SD.items()}  # 4 pooled seed sds of the smoke scene
+SEED_SPREAD = two_run_tolerance(SMOKE_SEED_SD)  # 4 sds of a two-run difference on the smoke scene
 
 
 def snakemake_cmd(workdir, U, *extra):

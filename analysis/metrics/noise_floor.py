@@ -78,6 +78,21 @@ def pooled_seed_sd(df) -> dict:
     return {m: float(pooled[f"{m}_sd"]) for m in METRICS}
 
 
+def two_run_tolerance(seed_sd: dict, k: float = 4.0) -> dict:
+    """Largest ``|difference|`` of each metric between two runs of one point that are not
+    bit-identical (a run resumed from a checkpoint and its straight twin; 2 MPI ranks and 1):
+    ``k`` sds of the difference of two runs, ``k x sqrt(2) x`` the seed-to-seed sd ``seed_sd``
+    (``{metric: sd}``, dataset units).
+
+    A resumed run is no closer to its straight twin than another heap is: stopped and
+    resumed at 10 moments of one smoke spread, its R_q differed by 1.23 pooled seed sds
+    (root mean square, largest 2.7; benchmarks/measured/resume.md), so the difference of
+    the two has about sqrt(2) seed sds, and ``k`` of a single run's sd would fail a sound
+    resume about once in 300 comparisons of one metric.
+    """
+    return {m: k * float(np.sqrt(2.0)) * sd for m, sd in seed_sd.items()}
+
+
 def _relative(sd, mean):
     sd, mean = np.asarray(sd, float), np.asarray(mean, float)
     with np.errstate(divide="ignore", invalid="ignore"):
