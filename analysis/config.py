@@ -184,8 +184,13 @@ def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
                   + ("" if axes else " (list an extra axis' values in sweep as well: its range)"))
     run = variants(config)
     for axis in axes:                       # each value alone (listed or in sweep.points): the message names it
+        labels = {f"{config_value(config, axis):g}": config_value(config, axis)}
         for value in dict.fromkeys([*sweep[axis], *(v[axis] for v in run)]):
             _check_variant(config, {axis: value}, base_dir, f"sweep.{axis}", value)
+            other = labels.setdefault(f"{value:g}", value)
+            if other != value:
+                _fail(f"sweep.{axis}", value, f"has the folder name {axis}={value:g} of {other!r} (the config's "
+                      "own value, or another listed one): sweep values that differ in their first 6 digits")
     for values in run:                      # and every combination run (cross-key facts between axes)
         if len(values) > 1:
             _check_variant(config, values, base_dir, "sweep", values)
@@ -264,9 +269,7 @@ def check_axis_key(config: dict, axis: str) -> None:
     section = path[0]
     allowed = section in ("material", "psd", "roller", "substrate", "timestep") and len(path) == 1 or \
         section == "fidelity" and len(path) == 2 and path[1] == level and last not in EXECUTION_KEYS
-    node = config
-    for key in [*path, last]:
-        node = node.get(key) if isinstance(node, dict) else None
+    node = config_value(config, axis)
     numeric = isinstance(node, (int, float)) and not isinstance(node, bool)
     if not allowed or not numeric or last.endswith("seed"):
         why = ("is a seed: sweep.replicates varies the seeds" if last.endswith("seed") else
@@ -275,6 +278,14 @@ def check_axis_key(config: dict, axis: str) -> None:
                "is not a numeric config key a simulation computes with (material, psd, roller, substrate, "
                f"timestep, or fidelity.{level} but its execution keys)")
         _fail(f"sweep.{axis}", config["sweep"][axis], why)
+
+
+def config_value(config: dict, key: str):
+    """The config's value at a dotted key (``roller.gap_um``); None where there is none."""
+    node = config
+    for part in key.split("."):
+        node = node.get(part) if isinstance(node, dict) else None
+    return node
 
 
 def resolve(config: dict, values: dict) -> dict:
@@ -288,7 +299,8 @@ def resolve(config: dict, values: dict) -> dict:
         node = out
         for k in path:
             node = node[k]
-        node[last] = value
+        if node[last] != value:     # the config's own value keeps its type (300, not 300.0): same fingerprint
+            node[last] = value
     return out
 
 
@@ -351,22 +363,30 @@ def variants(config: dict) -> list[dict]:
 
 @dataclass(frozen=True)
 class Run:
-    """One run of the sweep: its speeds, replicate and extra axes' values, and where it lives."""
+    """One run of the sweep: its speeds, replicate and extra axes' values, and where it lives.
+
+    A value equal to the config's own (``own``) is left out of the folder names, so a run at the
+    config's values of every extra axis is the plain (U, omega) run: adding an axis to a finished
+    study reuses its runs and heaps (their physics fingerprints guard the reuse)."""
     U: float                # mm/s
     omega: float            # rad/s
     replicate: int
     values: tuple           # ((axis, value), ...) of the extra axes, in sweep order
+    own: tuple = ()         # ((axis, the config's own value), ...)
+
+    def _folders(self, values: dict) -> str:
+        return variant_path({k: v for k, v in values.items() if (k, v) not in self.own})
 
     @property
     def name(self) -> str:
-        """Its folder under ``runs/``: ``U70_w-10_r0``, or ``roller.gap_um=200/U70_w-10_r0``."""
-        return variant_path(dict(self.values)) + run_name(self.U, self.omega, self.replicate)
+        """Its folder under ``runs/``: ``U70_w-10_r0``, or ``roller.gap_um=400/U70_w-10_r0``."""
+        return self._folders(dict(self.values)) + run_name(self.U, self.omega, self.replicate)
 
     @property
     def heap(self) -> str:
         """Its heap's (geometry's and settle's) folder: ``r0``, or the values of the axes the heap
         depends on (all but :data:`SPREAD_ONLY_AXES`) before it: ``psd.mean_diameter_um=150/r0``."""
-        return variant_path(self.heap_values) + f"r{self.replicate}"
+        return self._folders(self.heap_values) + f"r{self.replicate}"
 
     @property
     def heap_values(self) -> dict:
@@ -382,7 +402,8 @@ class Run:
 def sweep_runs(config: dict) -> list[Run]:
     """Every run: each point of :func:`sweep_points` times ``sweep.replicates``."""
     axes = sweep_axes(config)
-    return [Run(p["U_mm_s"], p["omega_rad_s"], r, tuple((a, p[a]) for a in axes))
+    own = tuple((a, config_value(config, a)) for a in axes)
+    return [Run(p["U_mm_s"], p["omega_rad_s"], r, tuple((a, p[a]) for a in axes), own)
             for p in sweep_points(config) for r in range(config["sweep"]["replicates"])]
 
 

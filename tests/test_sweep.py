@@ -60,21 +60,35 @@ def test_extra_axes_make_a_full_grid_with_nested_folders(base):
     config = load_config(with_sweep(base, **THREE_AXES))
     runs = sweep_runs(config)
     assert len(runs) == 2 * 2 * 2 * 2
-    assert runs[0].name == "roller.gap_um=300/material.sliding_friction_particle=0.3/U85_w-10_r0"
+    # a value equal to the config's own (gap 300 um, friction 0.5) is left out of the folder names
+    assert [r.name for r in runs[:4]] == ["material.sliding_friction_particle=0.3/U85_w-10_r0", "U85_w-10_r0",
+                                          "roller.gap_um=400/material.sliding_friction_particle=0.3/U85_w-10_r0",
+                                          "roller.gap_um=400/U85_w-10_r0"]
     assert len({r.name for r in runs}) == len(runs)
     # the gap shares its heap: one settle per friction value, not per (gap, friction)
-    assert {r.heap for r in runs} == {"material.sliding_friction_particle=0.3/r0",
-                                      "material.sliding_friction_particle=0.5/r0"}
+    assert {r.heap for r in runs} == {"material.sliding_friction_particle=0.3/r0", "r0"}
     run = next(r for r in runs if r.name.startswith("roller.gap_um=400/material.sliding_friction_particle=0.3"))
     spread, heap = run_config(config, run), heap_config(config, run)
     assert spread["roller"]["gap_um"] == 400 and spread["material"]["sliding_friction_particle"] == 0.3
     assert heap["roller"]["gap_um"] == 300 and heap["material"]["sliding_friction_particle"] == 0.3
     assert scene(spread).roller_gap == pytest.approx(400e-6)
     # the fingerprints Snakemake re-runs on: the gap changes the spread's, not the heap's
-    twin = next(r for r in runs if r.name.startswith("roller.gap_um=300/material.sliding_friction_particle=0.3"))
+    twin = next(r for r in runs if r.name.startswith("material.sliding_friction_particle=0.3"))
     level = config["level"]
     assert simulation_fingerprint(heap_config(config, twin), level) == simulation_fingerprint(heap, level)
     assert simulation_fingerprint(run_config(config, twin), level) != simulation_fingerprint(spread, level)
+
+
+def test_an_axis_added_to_a_finished_study_reuses_its_runs(base):
+    """The runs at the config's own value of a new axis are the (U, omega) study's, folder and
+    physics fingerprint alike, so Snakemake runs only the new value's."""
+    plain = load_config(with_sweep(base))
+    swept = load_config(with_sweep(base, **{"roller.gap_um": [300, 350]}))
+    level = base["level"]
+    old = {r.name: simulation_fingerprint(run_config(plain, r), level) for r in sweep_runs(plain)}
+    new = {r.name: simulation_fingerprint(run_config(swept, r), level) for r in sweep_runs(swept)}
+    assert {k: new[k] for k in old} == old
+    assert sorted(set(new) - set(old)) == sorted(f"roller.gap_um=350/{name}" for name in old)
 
 
 def test_explicit_points_over_all_axes(base):
@@ -86,8 +100,7 @@ def test_explicit_points_over_all_axes(base):
     config["surrogate"]["n_test"] = 1               # 4 points: 3 to train on
     config = load_config(config)
     assert [r.name for r in sweep_runs(config)] == [
-        "roller.gap_um=350/U70_w-5_r0", "roller.gap_um=300/U47.5_w2.5_r0",
-        "roller.gap_um=400/U100_w0_r0", "roller.gap_um=300/U85_w10_r0"]
+        "roller.gap_um=350/U70_w-5_r0", "U47.5_w2.5_r0", "roller.gap_um=400/U100_w0_r0", "U85_w10_r0"]
     assert sweep_points(config)[1] == {"U_mm_s": 47.5, "omega_rad_s": 2.5, "roller.gap_um": 300.0}
     points[0]["roller.gap_um"] = 250                # a point's value is checked as a listed one is
     with pytest.raises(ConfigError, match="'sweep.roller.gap_um' = 250"):
@@ -107,7 +120,8 @@ def test_explicit_points_over_all_axes(base):
     ({"fidelity.default.mpi_ranks": [1, 2]}, "'sweep.fidelity.default.mpi_ranks'"),
     ({"material.no_such_key": [1, 2]}, "'sweep.material.no_such_key'"),
     ({"roller.gap_um": [300, "wide"]}, "sweep.roller.gap_um.1"),
-    ({"roller.gap_um": [300, 300.0000001]}, "the same run folder twice"),
+    ({"roller.gap_um": [300, 300.0000001]}, "'sweep.roller.gap_um' = 300.0000001: has the folder name "
+                                           "roller.gap_um=300 of 300"),
     ({"psd.min_diameter_um": [100, 150], "psd.mean_diameter_um": [120, 175]},
      "in that combination, config key 'psd.mean_diameter_um' = 120"),
     ({"roller.gap_um": [300, 400], "points_mm_s_rad_s": [[40, 0], [70, 5], [100, 0], [85, 5]]},
