@@ -110,6 +110,27 @@ def check_config(config: dict, base_dir: Path = Path(".")) -> None:
     """Cross-key checks the schema cannot express, then the sweep's (:func:`check_sweep`)."""
     check_physics(config, base_dir)
     check_sweep(config, base_dir)
+    check_maps(config)
+
+
+def check_maps(config: dict) -> None:
+    """``maps`` names inputs of the sweep (U_mm_s, omega_rad_s, its extra axes): two to span,
+    others to hold inside their swept range, one other for the panels."""
+    maps, points = config["maps"], sweep_points(config)
+    inputs = [*SPEED_AXES, *sweep_axes(config)]
+    known = f"the sweep's inputs are {', '.join(inputs)}"
+    for axis in maps["axes"]:
+        if axis not in inputs:
+            _fail("maps.axes", maps["axes"], f"names {axis!r}, not an input: {known}")
+    for name, value in maps["hold"].items():
+        if name not in inputs or name in maps["axes"]:
+            _fail(f"maps.hold.{name}", value, f"holds what is not an input outside maps.axes: {known}")
+        lo, hi = min(p[name] for p in points), max(p[name] for p in points)
+        if not lo <= value <= hi:
+            _fail(f"maps.hold.{name}", value, f"lies outside the swept range {lo:g}..{hi:g}")
+    panels = maps["panels"]
+    if panels is not None and (panels not in inputs or panels in maps["axes"] or panels in maps["hold"]):
+        _fail("maps.panels", panels, f"must be an input neither mapped (maps.axes) nor held (maps.hold): {known}")
 
 
 def check_physics(config: dict, base_dir: Path = Path(".")) -> None:

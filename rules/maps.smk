@@ -1,5 +1,5 @@
 rule maps:
-    """Figures 6-10: regressed surfaces, parity plots, the hybrid process map."""
+    """Figures 6-10: regressed surfaces, parity plots, the hybrid process map (over maps.axes)."""
     input:
         model=rules.surrogate.output.model,
         dataset=rules.dataset.output[0],
@@ -10,6 +10,8 @@ rule maps:
         f"{LOGS}/maps.log",
     benchmark:
         f"{BENCH}/maps.tsv"
+    params:
+        maps=CONFIG["maps"],
     script:
         "../scripts/render_maps.py"
 

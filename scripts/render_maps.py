@@ -1,4 +1,4 @@
-"""Snakemake entry: Figures 6-10 (surfaces, parity plots, process map) into a directory."""
+"""Snakemake entry: Figures 6-10 (surfaces, parity plots, process map) over maps.axes into a directory."""
 
 import pandas as pd
 
@@ -10,5 +10,7 @@ from analysis.viz.maps import render_maps
 with rule_context(snakemake):
     model, _ = load_surrogate(snakemake.input.model)
     df = pd.read_csv(snakemake.input.dataset)
-    for path in render_maps(model, df, read_split(snakemake.input.split, df), snakemake.output[0]):
+    maps = snakemake.params.maps
+    for path in render_maps(model, df, read_split(snakemake.input.split, df), snakemake.output[0],
+                            axes=maps["axes"], hold=maps["hold"], panels=maps["panels"]):
         print(path)

@@ -88,7 +88,8 @@ def test_render_maps_script(fitted, dataset, tmp_path, fake_snakemake):
     smk = fake_snakemake({"model": str(tmp_path / "model.joblib"),
                                   "dataset": str(tmp_path / "dataset.csv"),
                                   "split": str(tmp_path / "split.csv")},
-                           {"maps": str(tmp_path / "maps")})
+                           {"maps": str(tmp_path / "maps")},
+                           {"maps": {"axes": ["U_mm_s", "omega_rad_s"], "hold": {}, "panels": None}})
     runpy.run_path(str(smk.scriptdir / "render_maps.py"), init_globals={"snakemake": smk})
     paths = sorted((tmp_path / "maps").iterdir())
     _check_figures(paths, tmp_path / "maps")

@@ -334,3 +334,64 @@ def test_maps_over_a_third_axis_are_drawn_per_value(gap_model, tmp_path):
         assert f"roller.gap_um={gap}/mass_g_surface.png" in names
         assert f"roller.gap_um={gap}/process_map.png" in names
     assert not any(n.startswith("roller.gap_um=300/") and "parity" in n for n in names)
+
+
+def test_a_map_over_any_pair_predicts_at_the_right_inputs(gap_model):
+    """A (U, gap) map with omega held: each grid node is the model's prediction at the full input
+    (U, omega, gap) in the model's order, and the iso-lines are the two mapped inputs'."""
+    from analysis.viz.maps import MapView, process_map_lines
+    model, _, df = gap_model
+    view = MapView(("U_mm_s", "roller.gap_um"), ("U_mm_s", "omega_rad_s", "roller.gap_um"), (("omega_rad_s", -10.0),))
+    grid = view.grid(model, (40, 100), (300, 400), 5)
+    expect = model.predict(np.c_[grid["U_mm_s"], np.full(25, -10.0), grid["roller.gap_um"]])
+    assert np.allclose(grid[["mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"]], expect)
+    assert grid["U_mm_s"].iloc[5] == 55 and grid["roller.gap_um"].iloc[1] == 325    # U outer, the gap inner
+    assert np.allclose(grid["throughput_mm2_s"], 10 + 0.3 * grid["U_mm_s"] + 1 + 0.02 * grid["roller.gap_um"],
+                       atol=0.2)
+    lines = process_map_lines(model, [40, 100], [300, 400], {m: 1.0 for m in ("mass_g", "throughput_mm2_s",
+                                                                               "roughness_um", "porosity_pct")},
+                              n=3, view=view)
+    assert set(lines["family"]) == {"U", "roller.gap_um"}
+    assert np.all(lines["omega_rad_s"] == -10)
+
+
+def test_maps_over_a_chosen_pair_hold_or_panel_the_other_inputs(gap_model, tmp_path):
+    from analysis.metrics.dataset import point_means
+    from analysis.viz.maps import map_views, process_map_figure, render_maps
+    model, _, df = gap_model
+    points, _ = point_means(df)
+    # (U, gap): one set per omega (5), 5 x 3 points in each
+    sets = map_views(points, ("U_mm_s", "roller.gap_um"))
+    assert [values for values, _ in sets] == [{"omega_rad_s": w} for w in (-20, -10, 0, 10, 20)]
+    assert all(len(views) == 1 and len(views[0][1]) == 15 for _, views in sets)
+    # held: one set; panels: the gap's three values side by side, 25 points each
+    held = map_views(points, ("U_mm_s", "omega_rad_s"), hold={"roller.gap_um": 350})
+    assert len(held) == 1 and held[0][0] == {} and len(held[0][1][0][1]) == 25
+    panels = map_views(points, ("U_mm_s", "omega_rad_s"), panels="roller.gap_um")
+    assert len(panels) == 1 and [v.held for v, _ in panels[0][1]] == [(("roller.gap_um", g),) for g in (300, 350, 400)]
+    with pytest.raises(ValueError, match="'material.restitution' is not an input"):
+        map_views(points, ("U_mm_s", "material.restitution"))
+    split = split_runs(df, 10, 0)
+    paths = render_maps(model, df, split, tmp_path / "maps", n=9, panels="roller.gap_um")
+    names = {str(p.relative_to(tmp_path / "maps")) for p in paths}
+    assert {"process_map.png", "mass_g_surface.png", "mass_g_parity.png"} <= names
+    assert not any("/" in n for n in names)                          # one set, in maps/ itself
+    views = [(v, points.iloc[rows].reset_index(drop=True), (np.arange(len(rows)), np.array([], int)))
+             for v, rows in panels[0][1]]
+    assert len(process_map_figure(model, None, None, n=21, panels=views).axes) == 3
+
+
+@pytest.mark.parametrize("maps, words", [
+    ({"axes": ["U_mm_s", "material.restitution"]}, "'maps.axes' = ['U_mm_s', 'material.restitution']: names "
+                                                   "'material.restitution', not an input"),
+    ({"axes": ["U_mm_s", "roller.gap_um"], "hold": {"omega_rad_s": 30}},
+     "'maps.hold.omega_rad_s' = 30: lies outside the swept range -20..20"),
+    ({"hold": {"U_mm_s": 70}}, "'maps.hold.U_mm_s' = 70: holds what is not an input outside maps.axes"),
+    ({"panels": "omega_rad_s"}, "'maps.panels' = 'omega_rad_s': must be an input neither mapped"),
+])
+def test_bad_maps_settings_name_the_key(base, maps, words):
+    config = with_sweep(base, **{"roller.gap_um": [300, 400]})
+    config["maps"].update(maps)
+    with pytest.raises(ConfigError) as err:
+        load_config(config)
+    assert words in str(err.value)

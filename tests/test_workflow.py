@@ -205,3 +205,40 @@ def test_changed_physics_reruns_the_simulations_but_more_ranks_do_not(workflow):
     physics = planned('material={"restitution": 0.5}')
     assert physics.get("settle") == 1 and physics.get("spread") == 6
     assert "spread" not in planned('fidelity={"smoke": {"mpi_ranks": 2}}')
+
+
+def test_a_gap_axis_added_to_the_study_runs_only_its_spreads_to_maps_and_a_recommendation(workflow):
+    """A 2 x 2 x 2 sweep over (U, omega, gap) through real LIGGGHTS (#19): the runs at the config's
+    own gap (300 um) are the study's, reused; the 350 um gap spreads its 4 runs from the same
+    settled heap; the dataset, surrogate, maps per gap and a recommendation with the gap held follow.
+    Last in the module: it rewrites the study's dataset and maps."""
+    finished = {p.parent.name: p.stat().st_mtime_ns for p in (workflow / "results/smoke/runs").glob("*/health.json")}
+    sweep = json.dumps({"U_mm_s": FIRST_U, "omega_rad_s": [-10, 5], "roller.gap_um": [300, 350]})
+    cmd = [*snakemake_cmd(workflow, FIRST_U)[:-1], f"sweep={sweep}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    log = proc.stderr + proc.stdout
+    assert log.count("rule spread:") == 4 and "rule settle:" not in log and "rule geometry:" not in log
+    runs = workflow / "results/smoke/runs"
+    assert sorted(p.parent.name for p in runs.glob("roller.gap_um=350/*/health.json")) == \
+        sorted(f"U{U}_w{w}_r0" for U in FIRST_U for w in (-10, 5))
+    assert all(p.stat().st_mtime_ns == finished[p.parent.name] for p in runs.glob("*/health.json"))
+    params = yaml.safe_load((runs / "roller.gap_um=350/U85_w-10_r0/parameters.yaml").read_text())
+    assert params["config"]["roller"]["gap_um"] == 350 and params["heap"] == "r0"
+    assert yaml.safe_load((runs / "U85_w-10_r0/parameters.yaml").read_text())["config"]["roller"]["gap_um"] == 300
+    data = pd.read_csv(workflow / "results/smoke/dataset.csv")
+    assert len(data) == 8 and sorted(set(data["roller.gap_um"])) == [300, 350]
+    assert np.all(data.lost == 0) and not data.heap_exhausted.any()
+    # the wider gap lays a thicker layer at every (U, omega) (eq. 5: more throughput)
+    wide = data.set_index(["U_mm_s", "omega_rad_s", "roller.gap_um"])["throughput_mm2_s"].unstack()
+    assert np.all(wide[350] > wide[300]), wide
+    scores = json.loads((workflow / "results/smoke/surrogate/scores.json").read_text())
+    assert list(scores["inputs"]) == ["U_mm_s", "omega_rad_s", "roller.gap_um"]
+    maps = workflow / "results/smoke/maps"
+    for gap in (300, 350):
+        assert (maps / f"roller.gap_um={gap}/process_map.png").stat().st_size > 10_000
+    found = subprocess.run([sys.executable, "-m", "analysis.surrogate.recommend", "--model",
+                            str(workflow / "results/smoke/surrogate/model.joblib"), "--max-porosity", "100",
+                            "--confidence", "0.5", "--fix", "roller.gap_um=350"], capture_output=True, text=True)
+    assert found.returncode == 0, found.stderr + found.stdout
+    assert "roller.gap_um = 350 um" in found.stdout

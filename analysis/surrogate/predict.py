@@ -177,7 +177,13 @@ def predict_grid(model, U_range, omega_range, n, confidence=None, extra=None):
     mesh = np.meshgrid(*(np.asarray(v, float) for v in extra.values()), np.linspace(*U_range, int(n)),
                        np.linspace(*omega_range, int(n)), indexing="ij")
     *values, U, omega = (a.ravel() for a in mesh)
-    grid = predict_frame(model, U, omega, confidence, dict(zip(extra, values)))
+    return with_indices(model, predict_frame(model, U, omega, confidence, dict(zip(extra, values))))
+
+
+def with_indices(model, grid):
+    """Add the hybrid indices to a prediction frame of ``model`` (:func:`predict_frame`), in
+    place, normalised by the metrics' maxima over the frame: ``throughput_index``,
+    ``defect_index``, and their ``_std`` or interval columns where the model gives them."""
     maxima = metric_maxima(grid)
     grid["throughput_index"], grid["defect_index"] = hybrid_indices(grid, maxima)
     if provides_std(model):

@@ -19,25 +19,28 @@ intervals as crosses along its iso-lines, the coverage level in each caption.
 
 from __future__ import annotations
 
+import itertools
 import textwrap
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
 import numpy as np
+import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from analysis.config import variant_path
 from analysis.io import atomic_path
-from analysis.metrics.dataset import INPUTS, METRICS, input_columns, point_means
+from analysis.metrics.dataset import INPUTS, METRICS, input_columns, input_units, point_means
 from analysis.surrogate.data import inputs_of
 from analysis.surrogate.predict import (
     hybrid_indices,
     index_intervals,
     metric_maxima,
     predict_frame,
-    predict_grid,
     provides_intervals,
+    with_indices,
 )
 from analysis.surrogate.scores import pearson_r
 
@@ -94,68 +97,142 @@ def supply_limited(df):
     return df["heap_exhausted"].astype(str).str.lower().eq("true").to_numpy()
 
 
-def surface_figure(model, df, split, metric, n=41):
-    """The regressed surface of one metric over (omega, U), as the paper's Figures 6-9 (a).
+
+#: Short symbols of the speeds for the iso-line labels; a swept config key is named by its path.
+SYMBOLS = {"U_mm_s": "U", "omega_rad_s": "ω"}
+
+
+def axis_label(name):
+    """Axis label of an input or metric with its unit: LABELS, else ``roller.gap_um (um)``."""
+    if name in LABELS:
+        return LABELS[name]
+    unit = input_units([name])[name]
+    return f"{name} ({unit})" if unit else name
+
+
+@dataclass(frozen=True)
+class MapView:
+    """The two inputs a map spans and the values the model's other inputs are held at.
+
+    Attributes
+    ----------
+    axes : (str, str)
+        (y, x): the paper's ``("U_mm_s", "omega_rad_s")``: U along the surface's depth and the
+        interval map's height, omega across; any two of ``inputs``.
+    inputs : tuple of str
+        The model's inputs in its order (:func:`analysis.metrics.dataset.input_columns`).
+    held : tuple of (str, float)
+        The value of every other input, in its units.
+    """
+    axes: tuple = tuple(INPUTS)
+    inputs: tuple = tuple(INPUTS)
+    held: tuple = ()
+
+    def frame(self, model, y, x, confidence=None):
+        """Predictions (:func:`analysis.surrogate.predict.predict_frame`) at ``(y[i], x[i])``."""
+        y = np.asarray(y, float)
+        cols = {self.axes[0]: y, self.axes[1]: np.asarray(x, float),
+                **{k: np.full(y.shape, float(v)) for k, v in self.held}}
+        return predict_frame(model, cols["U_mm_s"], cols["omega_rad_s"], confidence,
+                             {c: cols[c] for c in self.inputs[2:]})
+
+    def grid(self, model, y_range, x_range, n):
+        """An n x n grid over the two axes (y outer), the hybrid indices normalised over it
+        (:func:`analysis.surrogate.predict.with_indices`); columns as :func:`predict_grid`'s."""
+        y, x = (a.ravel() for a in np.meshgrid(np.linspace(*y_range, int(n)), np.linspace(*x_range, int(n)),
+                                               indexing="ij"))
+        return with_indices(model, self.frame(model, y, x))
+
+    def ranges(self, points):
+        """(y range, x range) of the two axes over ``points``."""
+        return tuple((float(points[a].min()), float(points[a].max())) for a in self.axes)
+
+    def title(self):
+        """The held inputs as text ('' for none): 'roller.gap_um = 350 um'."""
+        units = input_units([k for k, _ in self.held])
+        return ", ".join(f"{SYMBOLS.get(k, k)} = {v:g} {units[k]}".rstrip() for k, v in self.held)
+
+
+def _panels(view, df, split):
+    """A one-panel list (view, points, split) when called with a plain (U, omega) figure's arguments."""
+    return [(view or MapView(inputs=tuple(input_columns(df))), df, split)]
+
+
+def _grid_fig(k, kind, **kwargs):
+    """A figure of ``k`` panels side by side (3-D axes for ``kind`` '3d'); returns (fig, axes)."""
+    width, height = kwargs.pop("size")
+    fig = _figure(figsize=(width * (1 + 0.85 * (k - 1)), height), **kwargs)
+    axes = [fig.add_subplot(1, k, i + 1, **({"projection": "3d"} if kind == "3d" else {})) for i in range(k)]
+    return fig, axes
+
+
+def surface_figure(model, df, split, metric, n=41, view=None, panels=None):
+    """The regressed surface of one metric over two inputs, as the paper's Figures 6-9 (a).
 
     Parameters
     ----------
     model : estimator
         Fitted surrogate.
     df : pandas.DataFrame
-        The simulated runs (speeds and metrics).
+        The simulated points (inputs and metrics).
     split : (array of int, array of int)
-        Row positions of the training and test runs.
+        Row positions of the training and test points.
     metric : str
         One of :data:`analysis.surrogate.data.METRICS`.
     n : int
-        Surface grid points per axis, over the runs' speed range.
+        Surface grid points per axis, over the points' range.
+    view : MapView, optional
+        The two inputs (default: U and omega) and the others' values.
+    panels : list of (MapView, DataFrame, split), optional
+        Side by side instead of ``view, df, split`` (small multiples; one colour scale).
 
     Returns
     -------
     matplotlib.figure.Figure
     """
-    X = inputs_of(df)
-    grid = predict_grid(model, (X[:, 0].min(), X[:, 0].max()), (X[:, 1].min(), X[:, 1].max()), n)
-    shape = (n, n)
-    U, omega, Z = (grid[c].to_numpy().reshape(shape) for c in ("U_mm_s", "omega_rad_s", metric))
-
-    fig = _figure(figsize=(8.0, 6.5))
-    ax = fig.add_subplot(projection="3d")
-    ax.set_box_aspect(None, zoom=0.85)
-    surf = ax.plot_surface(omega, U, Z, cmap="turbo", alpha=0.8, linewidth=0,
-                           antialiased=True, rasterized=True)
-    for rows, colour, label in ((split[0], _TRAIN, "training runs"), (split[1], _TEST, "test runs")):
-        ax.scatter(X[rows, 1], X[rows, 0], df[metric].to_numpy(float)[rows], color=colour,
-                   s=22, depthshade=False, label=f"{label} ({len(rows)})")
-    limited = supply_limited(df)
-    if limited.any():
-        ax.scatter(X[limited, 1], X[limited, 0], df[metric].to_numpy(float)[limited], facecolor="none",
-                   edgecolor="tab:red", s=90, linewidth=1.5, depthshade=False,
-                   label=f"supply-limited: a lower bound ({limited.sum()})")
-    _replicate_ranges(ax, df, metric)
-    ax.set_xlabel(LABELS["omega_rad_s"], labelpad=8)
-    ax.set_ylabel(LABELS["U_mm_s"], labelpad=8)
-    ax.zaxis.set_rotate_label(False)
-    ax.set_zlabel(LABELS[metric], labelpad=12, rotation=90)
-    ax.view_init(elev=25, azim=-125)
-    ax.set_title(f"{TITLES[metric]}: regressed surface")
-    ax.legend(loc="upper left", fontsize=9)
-    fig.colorbar(surf, ax=ax, shrink=0.6, pad=0.02, label=LABELS[metric])
-    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.04, top=0.94)
+    panels = panels or _panels(view, df, split)
+    grids = [v.grid(model, *v.ranges(pts), n) for v, pts, _ in panels]
+    lo, hi = min(g[metric].min() for g in grids), max(g[metric].max() for g in grids)
+    fig, axes = _grid_fig(len(panels), "3d", size=(8.0, 6.5))
+    for ax, (v, pts, part), grid in zip(axes, panels, grids):
+        (ya, xa), shape = v.axes, (n, n)
+        Y, X, Z = (grid[c].to_numpy().reshape(shape) for c in (ya, xa, metric))
+        ax.set_box_aspect(None, zoom=0.85)
+        surf = ax.plot_surface(X, Y, Z, cmap="turbo", alpha=0.8, linewidth=0, antialiased=True, rasterized=True,
+                               **({"vmin": lo, "vmax": hi} if len(panels) > 1 else {}))  # panels: one scale
+        x, y, z = (pts[c].to_numpy(float) for c in (xa, ya, metric))
+        for rows, colour, label in ((part[0], _TRAIN, "training runs"), (part[1], _TEST, "test runs")):
+            ax.scatter(x[rows], y[rows], z[rows], color=colour, s=22, depthshade=False,
+                       label=f"{label} ({len(rows)})")
+        limited = supply_limited(pts)
+        if limited.any():
+            ax.scatter(x[limited], y[limited], z[limited], facecolor="none", edgecolor="tab:red", s=90,
+                       linewidth=1.5, depthshade=False, label=f"supply-limited: a lower bound ({limited.sum()})")
+        _replicate_ranges(ax, pts, metric, v.axes)
+        ax.set_xlabel(axis_label(xa), labelpad=8)
+        ax.set_ylabel(axis_label(ya), labelpad=8)
+        ax.zaxis.set_rotate_label(False)
+        ax.set_zlabel(LABELS[metric], labelpad=12, rotation=90)
+        ax.view_init(elev=25, azim=-125)
+        ax.set_title(f"{TITLES[metric]}: regressed surface" + (f"\n{v.title()}" if v.title() else ""))
+        ax.legend(loc="upper left", fontsize=9)
+    fig.colorbar(surf, ax=axes if len(axes) > 1 else axes[0], shrink=0.6, pad=0.02, label=LABELS[metric])
+    if len(panels) == 1:
+        fig.subplots_adjust(left=0.02, right=0.98, bottom=0.04, top=0.94)
     return fig
 
 
-def _replicate_ranges(ax, points, metric):
-    """Vertical +-1 seed-to-seed std segments at replicated points (3-D axes)."""
+def _replicate_ranges(ax, points, metric, axes=tuple(INPUTS)):
+    """Vertical +-1 seed-to-seed std segments at replicated points (3-D axes; ``axes`` = (y, x) inputs)."""
     if f"{metric}_sd" not in points or not (points[f"{metric}_sd"] > 0).any():
         return
     rep = points[points[f"{metric}_sd"] > 0]
     mean, sd = rep[metric].to_numpy(float), rep[f"{metric}_sd"].to_numpy(float)
-    for w, u, lo, hi in zip(rep["omega_rad_s"], rep["U_mm_s"], mean - sd, mean + sd):
-        ax.plot([w, w], [u, u], [lo, hi], color="0.3", lw=1)
+    for x, y, lo, hi in zip(rep[axes[1]], rep[axes[0]], mean - sd, mean + sd):
+        ax.plot([x, x], [y, y], [lo, hi], color="0.3", lw=1)
 
 
-def interval_figure(model, df, split, metric, n=41):
+def interval_figure(model, df, split, metric, n=41, view=None, panels=None):
     """Companion of the regressed surface: the half-width of the calibrated single-run interval.
 
     Parameters
@@ -171,34 +248,41 @@ def interval_figure(model, df, split, metric, n=41):
         One of METRICS.
     n : int
         Grid points per axis.
+    view, panels
+        As :func:`surface_figure`'s.
 
     Returns
     -------
     matplotlib.figure.Figure
-        Filled contours over (omega, U) of half the width of the interval a single
-        new run falls in at the model's confidence (metric units), the training
-        (blue) and test (black) points on top; the caption names the level and method.
+        Filled contours over the two inputs (the paper's: omega across, U up) of half the width
+        of the interval a single new run falls in at the model's confidence (metric units), the
+        training (blue) and test (black) points on top; the caption names the level and method.
     """
-    X = inputs_of(df)
-    grid = predict_grid(model, (X[:, 0].min(), X[:, 0].max()), (X[:, 1].min(), X[:, 1].max()), n)
-    U, omega = (grid[c].to_numpy().reshape(n, n) for c in ("U_mm_s", "omega_rad_s"))
-    half = ((grid[f"{metric}_hi"] - grid[f"{metric}_lo"]) / 2).to_numpy().reshape(n, n)
+    panels = panels or _panels(view, df, split)
     level = _level(model)
-    fig = _figure(figsize=(7.5, 6.2), layout="constrained")
-    ax = fig.add_subplot()
-    if not np.isfinite(half).all():        # too few calibration runs for this level
+    fig, axes = _grid_fig(len(panels), "2d", size=(7.5, 6.2), layout="constrained")
+    grids = [v.grid(model, *v.ranges(pts), n) for v, pts, _ in panels]
+    halves = [((g[f"{metric}_hi"] - g[f"{metric}_lo"]) / 2).to_numpy().reshape(n, n) for g in grids]
+    (ya, xa), titles = panels[0][0].axes, [v.title() for v, _, _ in panels]
+    if not all(np.isfinite(h).all() for h in halves):      # too few calibration runs for this level
+        ax = axes[0]
         ax.text(0.5, 0.5, _too_few(model), ha="center", va="center", transform=ax.transAxes, wrap=True)
-        ax.set(xlabel=LABELS["omega_rad_s"], ylabel=LABELS["U_mm_s"], title=f"{TITLES[metric]}: no {level} interval")
+        ax.set(xlabel=axis_label(xa), ylabel=axis_label(ya), title=f"{TITLES[metric]}: no {level} interval")
         return fig
-    filled = ax.contourf(omega, U, half, levels=14, cmap="viridis")
-    for rows, colour, marker, label in ((split[0], _TRAIN, "o", "training runs"),
-                                        (split[1], _TEST, "s", "test runs")):
-        ax.scatter(X[rows, 1], X[rows, 0], color=colour, edgecolor="white", marker=marker,
-                   s=30, label=f"{label} ({len(rows)})")
-    ax.set(xlabel=LABELS["omega_rad_s"], ylabel=LABELS["U_mm_s"],
-           title=f"{TITLES[metric]}: {level} single-run interval")
-    fig.colorbar(filled, ax=ax, label=f"half-width of the {level} interval of {LABELS[metric]}")
-    ax.legend(loc="upper left", fontsize=8, framealpha=0.8)
+    levels = np.linspace(min(h.min() for h in halves), max(h.max() for h in halves), 15)
+    for ax, (v, pts, part), grid, half, title in zip(axes, panels, grids, halves, titles):
+        Y, X = (grid[c].to_numpy().reshape(n, n) for c in v.axes)
+        filled = ax.contourf(X, Y, half, levels=levels if len(panels) > 1 else 14, cmap="viridis")
+        x, y = (pts[c].to_numpy(float) for c in (xa, ya))
+        for rows, colour, marker, label in ((part[0], _TRAIN, "o", "training runs"),
+                                            (part[1], _TEST, "s", "test runs")):
+            ax.scatter(x[rows], y[rows], color=colour, edgecolor="white", marker=marker,
+                       s=30, label=f"{label} ({len(rows)})")
+        ax.set(xlabel=axis_label(xa), ylabel=axis_label(ya),
+               title=f"{TITLES[metric]}: {level} single-run interval" + (f"\n{title}" if title else ""))
+        ax.legend(loc="upper left", fontsize=8, framealpha=0.8)
+    fig.colorbar(filled, ax=axes if len(axes) > 1 else axes[0],
+                 label=f"half-width of the {level} interval of {LABELS[metric]}")
     _caption(fig, f"{level} of new DEM runs fall within the prediction +- this (calibrated by grouped "
              "cross-conformal prediction on held-out runs; run-to-run noise included)")
     return fig
@@ -259,94 +343,121 @@ def parity_figure(df, predicted, split, metric):
     return fig
 
 
-def process_map_lines(model, U_values, omega_values, maxima, n=101):
-    """Iso-U and iso-omega lines of the surrogate in hybrid-index space.
+
+
+def process_map_lines(model, U_values, omega_values, maxima, n=101, view=None):
+    """Iso-lines of the surrogate's two map inputs in hybrid-index space.
 
     Parameters
     ----------
     model : estimator
         Fitted surrogate.
     U_values, omega_values : sequence of float
-        The swept speeds (mm/s, rad/s); one line per value, running over the
-        range of the other speed.
+        The swept values of the view's two inputs (default U in mm/s and omega in rad/s); one
+        line per value, running over the range of the other input.
     maxima : dict
         Metric maxima to normalise by (:func:`analysis.surrogate.predict.metric_maxima`).
     n : int
         Points per line.
+    view : MapView, optional
+        The two inputs and the others' values (default: U and omega).
 
     Returns
     -------
     pandas.DataFrame
-        Columns ``family`` ('U' or 'omega'), ``value`` (the fixed speed),
-        U_mm_s, omega_rad_s, the metrics, ``throughput_index``, ``defect_index``.
+        Columns ``family`` ('U' or 'omega' for the speeds, else the input's name), ``value``
+        (the line's fixed value), the inputs, the metrics, ``throughput_index``, ``defect_index``.
     """
-    U_values, omega_values = np.asarray(U_values, float), np.asarray(omega_values, float)
-    sweep_U = np.linspace(U_values.min(), U_values.max(), n)
-    sweep_omega = np.linspace(omega_values.min(), omega_values.max(), n)
-    U = np.r_[np.repeat(U_values, n), np.tile(sweep_U, omega_values.size)]
-    omega = np.r_[np.tile(sweep_omega, U_values.size), np.repeat(omega_values, n)]
-    lines = predict_frame(model, U, omega)
-    lines.insert(0, "family", np.repeat(["U", "omega"], [U_values.size * n, omega_values.size * n]))
-    lines.insert(1, "value", np.r_[np.repeat(U_values, n), np.repeat(omega_values, n)])
+    view = view or MapView()
+    a, b = np.asarray(U_values, float), np.asarray(omega_values, float)
+    along_a, along_b = np.linspace(a.min(), a.max(), n), np.linspace(b.min(), b.max(), n)
+    y = np.r_[np.repeat(a, n), np.tile(along_a, b.size)]
+    x = np.r_[np.tile(along_b, a.size), np.repeat(b, n)]
+    lines = view.frame(model, y, x)
+    families = [{"U_mm_s": "U", "omega_rad_s": "omega"}.get(c, c) for c in view.axes]
+    lines.insert(0, "family", np.repeat(families, [a.size * n, b.size * n]))
+    lines.insert(1, "value", np.r_[np.repeat(a, n), np.repeat(b, n)])
     lines["throughput_index"], lines["defect_index"] = hybrid_indices(lines, maxima)
     return lines
 
 
-def iso_values(df, n_U=5, n_omega=9):
-    """Speeds of the process map's iso-lines: the design's own if it is a full grid, else
-    ``n_U`` and ``n_omega`` evenly spaced values over its range (mm/s, rad/s)."""
-    U, omega = (np.unique(df[c].to_numpy(float)) for c in INPUTS)
-    n_points = len(np.unique(df[list(INPUTS)].to_numpy(float), axis=0))
+def iso_values(df, n_U=5, n_omega=9, axes=tuple(INPUTS)):
+    """Values of the process map's iso-lines of the two ``axes`` (default U and omega): the points'
+    own if they form a full grid over the two, else ``n_U`` and ``n_omega`` evenly spaced values over
+    their range (the inputs' units)."""
+    U, omega = (np.unique(df[c].to_numpy(float)) for c in axes)
+    n_points = len(np.unique(df[list(axes)].to_numpy(float), axis=0))
     if U.size * omega.size == n_points and U.size <= 15 and omega.size <= 15:
         return U, omega
-    return (np.round(np.linspace(U.min(), U.max(), n_U), 1),
-            np.round(np.linspace(omega.min(), omega.max(), n_omega), 2))
+    return tuple(np.round(np.linspace(v.min(), v.max(), k), _DECIMALS.get(c, 4 - int(np.log10(np.ptp(v) or 1))))
+                 for v, k, c in ((U, n_U, axes[0]), (omega, n_omega, axes[1])))
 
 
-def process_map_figure(model, df, split, n=101):
+#: Decimals of the speeds' iso-line values off a full grid (others: 4 significant digits of their range).
+_DECIMALS = {"U_mm_s": 1, "omega_rad_s": 2}
+
+
+def process_map_figure(model, df, split, n=101, view=None, panels=None):
     """The spreading process map of the paper's Figure 10.
 
-    The metric maxima are those of the surrogate on an n x n grid over the
-    swept range; the iso-lines and the simulated runs are normalised by them.
+    The metric maxima are those of the surrogate on an n x n grid over the swept range (of
+    every panel together, so that panels share one scale); the iso-lines and the simulated
+    runs are normalised by them.
 
     Parameters
     ----------
     model : estimator
         Fitted surrogate.
     df : pandas.DataFrame
-        The simulated points; its distinct U and omega are the iso-line values
+        The simulated points; their distinct values of the two inputs are the iso-line values
         when they form a full grid (:func:`iso_values`).
     split : (array of int, array of int)
         Row positions of the training and test runs.
     n : int
         Grid points per axis and points per line.
+    view, panels
+        As :func:`surface_figure`'s.
 
     Returns
     -------
     matplotlib.figure.Figure
     """
-    U_values, omega_values = iso_values(df)
-    maxima = metric_maxima(predict_grid(model, (U_values.min(), U_values.max()),
-                                        (omega_values.min(), omega_values.max()), n))
-    lines = process_map_lines(model, U_values, omega_values, maxima, n)
-    runs_t, runs_d = hybrid_indices(df, maxima)
+    panels = panels or _panels(view, df, split)
+    iso = [iso_values(pts, axes=v.axes) for v, pts, _ in panels]
+    grids = pd.concat([v.grid(model, (a.min(), a.max()), (b.min(), b.max()), n)
+                       for (v, _, _), (a, b) in zip(panels, iso)])
+    maxima = metric_maxima(grids)
     with_intervals = provides_intervals(model) and model.is_finite()
+    fig, axes = _grid_fig(len(panels), "2d", size=(8.0, 6.5), layout="constrained")
+    for ax, (v, pts, part), (a_values, b_values) in zip(axes, panels, iso):
+        _draw_process_map(ax, model, v, pts, part, a_values, b_values, maxima, n, with_intervals)
+    if with_intervals:
+        _caption(fig, f"Crosses: the {_level(model)} interval of the indices of a single new run "
+                 "(calibrated by grouped cross-conformal prediction on held-out runs; run-to-run noise included)")
+    elif provides_intervals(model):
+        _caption(fig, f"No interval crosses: {_too_few(model)}")
+    return fig
+
+
+def _draw_process_map(ax, model, view, df, split, a_values, b_values, maxima, n, with_intervals):
+    """One process map into ``ax``: iso-lines of the view's two inputs, the runs, the intervals."""
+    lines = process_map_lines(model, a_values, b_values, maxima, n, view)
+    runs_t, runs_d = hybrid_indices(df, maxima)
     if with_intervals:
         index_intervals(lines, maxima)
-
-    fig = _figure(figsize=(8.0, 6.5), layout="constrained")
-    ax = fig.add_subplot()
-    # colour, label, where it goes (above the line's end with the least omega /
-    # right of the end with the greatest U), legend entry
-    styles = {"U": ("tab:blue", "U = {:g} mm/s", "omega_rad_s", -1,
-                    dict(xytext=(0, 6), ha="center", va="bottom"), "iso-U lines"),
-              "omega": ("tab:red", "ω = {:g} rad/s", "U_mm_s", 1,
-                        dict(xytext=(6, 0), ha="left", va="center"), "iso-ω lines")}
+    (ya, xa), units = view.axes, input_units(view.axes)
+    label = {c: f"{SYMBOLS.get(c, c)} = {{:g}} {units[c]}".rstrip() for c in view.axes}
+    legend = {c: f"iso-{SYMBOLS.get(c, c)} lines" for c in view.axes}
+    # colour, label, where it goes (above the line's end with the least of the other input /
+    # right of the end with the greatest first input), legend entry
+    first, second = lines["family"].iloc[0], lines["family"].iloc[-1]
+    styles = {first: ("tab:blue", label[ya], xa, -1, dict(xytext=(0, 6), ha="center", va="bottom"), legend[ya]),
+              second: ("tab:red", label[xa], ya, 1, dict(xytext=(6, 0), ha="left", va="center"), legend[xa])}
     labelled = set()
     for (family, value), line in lines.groupby(["family", "value"], sort=False):
-        colour, fmt, along, sign, place, legend = styles[family]
+        colour, fmt, along, sign, place, entry = styles[family]
         ax.plot(line["throughput_index"], line["defect_index"], color=colour, lw=1.2,
-                label=None if family in labelled else legend)
+                label=None if family in labelled else entry)
         labelled.add(family)
         if with_intervals:     # single-run interval crosses at every 10th point of the line
             every = line.iloc[::10]
@@ -370,47 +481,65 @@ def process_map_figure(model, df, split, n=101):
     ax.set_xlabel(r"throughput index  $Q_s/\max(Q_s)\cdot M_s/\max(M_s)$")
     ax.set_ylabel(r"defect index  $R_q/\max(R_q)\cdot \Phi/\max(\Phi)$")
     ax.margins(x=0.15, y=0.06)   # room for the line labels
-    ax.set_title("Spreading process map")
+    ax.set_title("Spreading process map" + (f"\n{view.title()}" if view.title() else ""))
     ax.legend(loc="best", fontsize=9)
     ax.grid(alpha=0.3)
-    if with_intervals:
-        _caption(fig, f"Crosses: the {_level(model)} interval of the indices of a single new run "
-                 "(calibrated by grouped cross-conformal prediction on held-out runs; run-to-run noise included)")
-    elif provides_intervals(model):
-        _caption(fig, f"No interval crosses: {_too_few(model)}")
-    return fig
 
 
-class HeldInputs:
-    """A fitted surrogate of more inputs than the speeds, seen over (U, omega) alone: its other
-    inputs (swept config keys) held at ``values`` (``{input: value}``, the model's order, config units).
+def map_views(points, axes=tuple(INPUTS), hold=None, panels=None):
+    """The map sets a study draws: for every combination of the swept values of the inputs that
+    are neither mapped (``axes``), held (``hold``) nor the panel input (``panels``), the views of
+    its panels and the points shown in each.
 
-    ``predict``, ``half_widths`` and ``predict_interval`` take (n, 2) speeds; everything else
-    (``confidence``, ``is_finite``, ...) is the model's.
+    Parameters
+    ----------
+    points : pandas.DataFrame
+        The simulated points (:func:`analysis.metrics.dataset.point_means`), every input a column.
+    axes : (str, str)
+        The two inputs each map spans, (y, x) (config ``maps.axes``).
+    hold : dict, optional
+        ``{input: value}``: inputs held at a value (config ``maps.hold``, their units).
+    panels : str, optional
+        An input drawn side by side, one panel per swept value (config ``maps.panels``).
+
+    Returns
+    -------
+    list of (dict, list of (MapView, numpy.ndarray))
+        Per map set: the slice's values (``{input: value}``, its folder,
+        :func:`analysis.config.variant_path`) and per panel its view and the positions of the
+        points drawn in it (those at the view's held values).
     """
+    inputs, hold = tuple(input_columns(points)), dict(hold or {})
+    for name in (*axes, *hold, *([panels] if panels else [])):
+        if name not in inputs:
+            raise ValueError(f"maps: {name!r} is not an input of this study ({', '.join(inputs)})")
+    sliced = [c for c in inputs if c not in (*axes, *hold, panels)]
+    swept = {c: np.unique(points[c].to_numpy(float)) for c in inputs}
+    combos = [dict(zip(sliced, v)) for v in itertools.product(*(swept[c] for c in sliced))]
+    sets = []
+    for values in combos:
+        panel_values = swept[panels] if panels else [None]
+        views = []
+        for p in panel_values:
+            held = {**values, **hold, **({panels: p} if panels else {})}
+            view = MapView(tuple(axes), inputs, tuple((c, float(held[c])) for c in inputs if c in held))
+            at = np.ones(len(points), dtype=bool)
+            for c, v in view.held:
+                at &= np.isclose(points[c].to_numpy(float), v)
+            views.append((view, np.flatnonzero(at)))
+        if any(len(rows) for _, rows in views):
+            sets.append((values, views))
+    return sets
 
-    def __init__(self, model, values):
-        self.model, self.values = model, dict(values)
 
-    def _full(self, X):
-        X = np.asarray(X, float)
-        return np.column_stack([X, *(np.full(len(X), float(v)) for v in self.values.values())])
+def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, panels=None):
+    """Write every figure: surfaces, parity plots, process map (and uncertainty maps).
 
-    def predict(self, X, return_std=False):
-        return self.model.predict(self._full(X), return_std=True) if return_std else self.model.predict(self._full(X))
-
-    def __getattr__(self, name):
-        attr = getattr(self.model, name)    # half_widths, predict_interval: only if the model has intervals
-        if name in ("half_widths", "predict_interval"):
-            return lambda X, *args, **kwargs: attr(self._full(X), *args, **kwargs)
-        return attr
-
-
-def render_maps(model, df, split, outdir, n=41):
-    """Write every figure: surfaces, parity plots, process map (and uncertainty maps); with
-    inputs beyond the speeds (a sweep's extra axes), one set per combination of their swept
-    values, in ``<outdir>/<axis>=<value>/...`` (:func:`analysis.config.variant_path`), the
-    other inputs held there (:class:`HeldInputs`).
+    The maps span two inputs (``axes``, default the paper's U and omega); the model's other
+    inputs (a sweep's extra axes) are held at ``hold`` or, if not held, drawn once per swept
+    value in ``<outdir>/<input>=<value>/...`` (:func:`map_views`); ``panels`` draws one input's
+    values side by side in each figure instead (small multiples, one colour scale). The paper's
+    study (inputs U and omega only) draws its figures straight into ``outdir``.
 
     Parameters
     ----------
@@ -426,51 +555,36 @@ def render_maps(model, df, split, outdir, n=41):
     n : int
         Grid points per axis of the surfaces (the process map uses
         ``max(n, 101)`` points per line).
+    axes, hold, panels
+        As :func:`map_views` (config ``maps``).
 
     Returns
     -------
     list of pathlib.Path
-        ``<metric>_surface.{png,svg}``, ``<metric>_parity.{png,svg}`` (with extra axes: once,
-        over every point, in ``outdir``; the rest per slice) and,
-        when the model gives calibrated intervals, ``<metric>_interval.{png,svg}`` per
-        metric (metric = dataset column, e.g. ``mass_g``), then
+        ``<metric>_parity.{png,svg}`` (every point, once, in ``outdir``), and per map set
+        ``<metric>_surface.{png,svg}``, when the model gives calibrated intervals
+        ``<metric>_interval.{png,svg}`` (metric = dataset column, e.g. ``mass_g``), then
         ``process_map.{png,svg}``.
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     points, split = point_means(df, tuple(np.asarray(rows, int) for rows in split))
-    extra = input_columns(df)[len(INPUTS):]
-    if not extra:
-        return _render_slice(model, points, split, outdir, n, parity=model.predict(inputs_of(points)))
     paths = []
-    with matplotlib.rc_context(_STYLE):     # parity plots: every point, once
+    with matplotlib.rc_context(_STYLE):
         predicted = model.predict(inputs_of(points))
         for metric in METRICS:
             paths += save_figure(parity_figure(points, predicted, split, metric), outdir, f"{metric}_parity")
-    for values, rows in points.groupby(extra, sort=True).indices.items():
-        values = dict(zip(extra, np.atleast_1d(values)))
-        in_slice = np.isin(np.arange(len(points)), rows)
-        sub_split = tuple(np.flatnonzero(np.isin(np.flatnonzero(in_slice), part)) for part in split)
-        sub = points[in_slice].reset_index(drop=True)
-        paths += _render_slice(HeldInputs(model, values), sub, sub_split, outdir / variant_path(values), n)
-    return paths
-
-
-def _render_slice(model, points, split, outdir, n, parity=None):
-    """The figures of :func:`render_maps` over (U, omega) for ``points`` into ``outdir``; the
-    parity plots too when given the predictions at the points (``parity``, shape (n, 4))."""
-    Path(outdir).mkdir(parents=True, exist_ok=True)
-    paths = []
-    with matplotlib.rc_context(_STYLE):
-        for metric in METRICS:
-            paths += save_figure(surface_figure(model, points, split, metric, n), outdir,
-                                 f"{metric}_surface")
-            if parity is not None:
-                paths += save_figure(parity_figure(points, parity, split, metric), outdir,
-                                     f"{metric}_parity")
-            if provides_intervals(model):
-                paths += save_figure(interval_figure(model, points, split, metric, n), outdir,
-                                     f"{metric}_interval")
-        paths += save_figure(process_map_figure(model, points, split, max(n, 101)), outdir,
-                             "process_map")
+        for values, views in map_views(points, axes, hold, panels):
+            where = outdir / variant_path(values)
+            where.mkdir(parents=True, exist_ok=True)
+            drawn = [(view, points.iloc[rows].reset_index(drop=True),
+                      tuple(np.flatnonzero(np.isin(rows, part)) for part in split)) for view, rows in views]
+            for metric in METRICS:
+                paths += save_figure(surface_figure(model, None, None, metric, n, panels=drawn), where,
+                                     f"{metric}_surface")
+                if provides_intervals(model):
+                    paths += save_figure(interval_figure(model, None, None, metric, n, panels=drawn), where,
+                                         f"{metric}_interval")
+            paths += save_figure(process_map_figure(model, None, None, max(n, 101), panels=drawn), where,
+                                 "process_map")
     return paths
