@@ -6,12 +6,10 @@ from analysis.config import (
     heaps_by_name,
     load_config,
     run_config,
-    run_name,
     runs_by_name,
     scene,
     simulation_fingerprint,
     sweep_runs,
-    variant_path,
 )
 
 try:  # the one check of the workflow's config (schema, then facts across keys); jobs trust it
@@ -21,9 +19,9 @@ except ConfigError as err:
 
 LEVEL = CONFIG["level"]
 SCENE = scene(CONFIG, LEVEL)
-# Rule parameters (run_physics, heap_physics, heap_geometry below) change when the physics of a
-# run or heap does: Snakemake then re-runs its geometry, settle and spread (but not for MPI ranks
-# or cluster limits).
+# The geometry, settle and spread rules carry the fingerprint of the physics of their heap or run
+# (its swept values in place) as a parameter: Snakemake re-runs them when it changes (but not for
+# MPI ranks or cluster limits).
 PROFILOMETER = {**CONFIG["profilometer"], "lines": SCENE.profilometer_lines}
 OUT = f"results/{LEVEL}"
 LOGS = f"results/logs/{LEVEL}"
@@ -40,35 +38,18 @@ HEAP_TABLE = heaps_by_name(CONFIG)
 RUNS = list(RUN_TABLE)
 # Deposit profiles and top views: the runs of the first combination of the extra axes' values.
 _FIRST = sweep_runs(CONFIG)[0].values
-_PREFIX = variant_path(dict(_FIRST))
-POINTS = [(r.U, r.omega) for r in sweep_runs(CONFIG) if r.values == _FIRST and r.replicate == 0]
+FIRST_RUNS = {(r.U, r.omega, r.replicate): r.name for r in sweep_runs(CONFIG) if r.values == _FIRST}
+POINTS = [(U, w) for U, w, rep in FIRST_RUNS if rep == 0]
 # Deposit profiles: the middle U, the omegas nearest -10, 0, +10 rad/s, every replicate.
 PROFILE_RUNS = deposit_profile_runs(POINTS, CONFIG["sweep"]["replicates"])
 # Top views (the paper's Figure 4): the fastest U at the omegas nearest -5, 0, +5 rad/s.
 _U_MAX = max(U for U, _ in POINTS)
 _OMEGAS = sorted({min([w for U, w in POINTS if U == _U_MAX], key=lambda w: abs(w - t)) for t in (-5, 0, 5)})
-TOP_VIEWS = [f"{OUT}/top_views/{_PREFIX}{run_name(_U_MAX, w, 0)}.png" for w in _OMEGAS]
+TOP_VIEWS = [f"{OUT}/top_views/{FIRST_RUNS[(_U_MAX, w, 0)]}.png" for w in _OMEGAS]
 
 
-def run_physics(wildcards):
-    """The fingerprint of what a run's spread computes with (its extra axes' values in place)."""
-    return simulation_fingerprint(run_config(CONFIG, RUN_TABLE[wildcards.run]), LEVEL)
-
-
-def heap_physics(wildcards):
-    """The fingerprint of what a heap's settle computes with."""
-    return simulation_fingerprint(heap_config(CONFIG, HEAP_TABLE[wildcards.heap]), LEVEL)
-
-
-def heap_geometry(wildcards):
-    """The fingerprint of what a heap's geometry computes with."""
-    return simulation_fingerprint(heap_config(CONFIG, HEAP_TABLE[wildcards.heap]), LEVEL,
-                                  sections=("roller", "substrate"))
-
-
-def heap_of(wildcards):
-    """The heap folder a run starts from."""
-    return RUN_TABLE[wildcards.run].heap
+# The heap folder each run starts from.
+HEAP_OF = {name: run.heap for name, run in RUN_TABLE.items()}
 
 
 wildcard_constraints:

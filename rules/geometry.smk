@@ -11,6 +11,8 @@ rule geometry:
         f"{BENCH}/geometry/{{heap}}.tsv"
     params:
         level=LEVEL,
-        physics=heap_geometry,
+        physics=lambda wc: simulation_fingerprint(
+            heap_config(CONFIG, HEAP_TABLE[wc.heap]), LEVEL, sections=("roller", "substrate")
+        ),
     script:
         "../scripts/geometry.py"

@@ -21,9 +21,7 @@ rule top_view:
     input:
         rules.spread.output.dump,
     output:
-        report(
-            f"{OUT}/top_views/{{run}}.png", caption="../report/top_view.rst", category="Top views"
-        ),
+        report(f"{OUT}/top_views/{{run}}.png", caption="../report/top_view.rst", category="Top views"),
     log:
         f"{LOGS}/top_view/{{run}}.log",
     benchmark:

@@ -2,7 +2,7 @@ rule layer_metrics:
     """The paper's eqs. 1-7 from the final dump, by the virtual profilometer; the layer as VTK for ParaView."""
     input:
         dump=rules.spread.output.dump,
-        substrate=lambda wc: f"{OUT}/meshes/{heap_of(wc)}/substrate.stl",
+        substrate=lambda wc: f"{OUT}/meshes/{HEAP_OF[wc.run]}/substrate.stl",
     output:
         metrics=f"{OUT}/runs/{{run}}/metrics.json",
         vtk=f"{OUT}/runs/{{run}}/final.vtp",  # here, not in a rule of its own: one Python start per run
@@ -48,7 +48,7 @@ rule trends:
 rule deposit_profile:
     """Layer mass along the travel for a few omegas, sampling region shaded: is the region in steady state?"""
     input:
-        [f"{OUT}/runs/{_PREFIX}{run_name(U, w, r)}/final.dump" for U, w, r in PROFILE_RUNS],
+        [f"{OUT}/runs/{FIRST_RUNS[(U, w, r)]}/final.dump" for U, w, r in PROFILE_RUNS],
     output:
         csv=f"{OUT}/deposit_profile.csv",
         png=report(f"{OUT}/deposit_profile.png", caption="../report/deposit_profile.rst", category="Dataset"),

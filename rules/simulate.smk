@@ -19,7 +19,7 @@ rule settle:
         mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
     params:
         level=LEVEL,
-        physics=heap_physics,
+        physics=lambda wc: simulation_fingerprint(heap_config(CONFIG, HEAP_TABLE[wc.heap]), LEVEL),
     script:
         "../scripts/settle.py"
 
@@ -27,10 +27,10 @@ rule settle:
 rule spread:
     """One spreading pass at U [mm/s] and omega [rad/s] (and the run's extra axes' values) from its settled heap."""
     input:
-        substrate=lambda wc: f"{OUT}/meshes/{heap_of(wc)}/substrate.stl",
-        roller_shell=lambda wc: f"{OUT}/meshes/{heap_of(wc)}/roller_shell.stl",
-        restart=lambda wc: f"{OUT}/settle/{heap_of(wc)}/settled.restart",
-        settled=lambda wc: f"{OUT}/settle/{heap_of(wc)}/settled.dump",
+        substrate=lambda wc: f"{OUT}/meshes/{HEAP_OF[wc.run]}/substrate.stl",
+        roller_shell=lambda wc: f"{OUT}/meshes/{HEAP_OF[wc.run]}/roller_shell.stl",
+        restart=lambda wc: f"{OUT}/settle/{HEAP_OF[wc.run]}/settled.restart",
+        settled=lambda wc: f"{OUT}/settle/{HEAP_OF[wc.run]}/settled.dump",
     output:
         dump=f"{OUT}/runs/{{run}}/final.dump",
         health=f"{OUT}/runs/{{run}}/health.json",
@@ -47,7 +47,7 @@ rule spread:
         mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
     params:
         level=LEVEL,
-        physics=run_physics,
+        physics=lambda wc: simulation_fingerprint(run_config(CONFIG, RUN_TABLE[wc.run]), LEVEL),
     script:
         "../scripts/spread.py"
 
