@@ -434,3 +434,17 @@ def test_workflow_evaluator_runs_a_gap_axis_in_the_config_s_run_folders(tmp_path
     assert [c for c in calls[1] if c.endswith("metrics.json")] == \
         [f"results/smoke/runs/{name}/metrics.json" for name in expected]
     assert expected == [f"{GAP}=400/{run_name(70.0, 5.5, 0)}"]         # today's naming (docs/sweep.md)
+
+
+def test_a_three_input_design_is_saved_for_recommend_over_every_axis(tmp_path):
+    from analysis.surrogate.adaptive import write_result
+    from analysis.surrogate.persistence import load_surrogate
+    from analysis.surrogate.recommend import recommend
+    result = run_adaptive(synthetic3, BOUNDS3, {**SETTINGS3, "max_runs": 20}, axes=[GAP], log=lambda line: None)
+    params = load_config(ROOT / "config.yaml")["surrogate"]
+    write_result(result, tmp_path, "smoke", surrogate_params={**params, "cv_repeats": 1})
+    model, meta = load_surrogate(tmp_path / "model.joblib")
+    assert meta["inputs"] == {"U_mm_s": "mm/s", "omega_rad_s": "rad/s", GAP: "um"}
+    assert meta["input_range"][GAP] == [300.0, 400.0]
+    assert recommend(model, meta, 1e9, n=11, fixed={GAP: 350.0})[GAP] == 350.0
+    assert list(pd.read_csv(tmp_path / "design.csv").columns[:3]) == ["U_mm_s", "omega_rad_s", GAP]
