@@ -428,6 +428,39 @@ def sweep_runs(config: dict) -> list[Run]:
             for p in sweep_points(config) for r in range(config["sweep"]["replicates"])]
 
 
+def runs_at(config: dict, points) -> list[Run]:
+    """The runs of :func:`sweep_runs` at ``points``: every replicate of each, in the order of ``points``.
+
+    Parameters
+    ----------
+    config : dict
+        A loaded config whose sweep runs the points.
+    points : iterable of dict
+        ``{"U_mm_s": U, "omega_rad_s": omega, <axis>: value, ...}`` over every axis of the sweep
+        (mm/s, rad/s, the axes' config units), as :func:`sweep_points` gives them; matched to
+        6 decimals.
+
+    Raises
+    ------
+    KeyError
+        A point the sweep does not run (named).
+    """
+    inputs = (*SPEED_AXES, *sweep_axes(config))
+
+    def key(point):
+        return tuple(round(float(point[a]), 6) for a in inputs)
+
+    table = {}
+    for run in sweep_runs(config):
+        table.setdefault(key(run.point), []).append(run)
+    runs = []
+    for point in points:
+        if key(point) not in table:
+            raise KeyError(f"the sweep does not run the point {point}")
+        runs += table[key(point)]
+    return runs
+
+
 def run_config(config: dict, run: Run) -> dict:
     """``config`` with the run's extra axes' values in place: what its spread computes with."""
     return resolve(config, dict(run.values))
