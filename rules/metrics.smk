@@ -29,6 +29,8 @@ rule dataset:
         f"{LOGS}/dataset.log",
     benchmark:
         f"{BENCH}/dataset.tsv"
+    params:
+        points=[RUN_TABLE[run].point for run in RUNS],  # each run's inputs, from the run table
     script:
         "../scripts/dataset.py"
 

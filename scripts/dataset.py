@@ -5,4 +5,5 @@ from analysis.rule import rule_context
 
 with rule_context(snakemake) as config:
     build_dataset(snakemake.input.metrics, snakemake.input.health, snakemake.input.benchmarks, snakemake.output[0],
-                  level=config["level"], keep_supply_limited=config["keep_supply_limited_runs"])
+                  level=config["level"], keep_supply_limited=config["keep_supply_limited_runs"],
+                  points=snakemake.params.points)

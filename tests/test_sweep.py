@@ -250,6 +250,18 @@ def test_dataset_has_a_column_per_axis_and_points_span_all_axes(tmp_path):
     assert len(test) == 4 and len(train) == 14
 
 
+def test_the_run_table_gives_the_inputs_of_a_run_written_before_its_axis(tmp_path):
+    """A plain (U, omega) run reused at the config's own gap has no gap in its metrics.json: the
+    dataset takes every run's inputs from the run table (``points``)."""
+    files = _synthetic_runs(tmp_path, with_gap=False)
+    points = [{"U_mm_s": U, "omega_rad_s": w, "roller.gap_um": 300.0} for U in (40, 70, 100) for w in (-10, 0, 10)]
+    df = build_dataset(files["metrics"], files["health"], files["bench"], tmp_path / "dataset.csv", points=points)
+    assert list(df.columns[:4]) == ["U_mm_s", "omega_rad_s", "roller.gap_um", "replicate"]
+    assert np.all(df["roller.gap_um"] == 300) and len(df) == 9
+    with pytest.raises(ValueError):         # one point per run
+        build_dataset(files["metrics"], files["health"], files["bench"], tmp_path / "x.csv", points=points[:-1])
+
+
 def test_dataset_without_axes_has_the_papers_columns(tmp_path):
     files = _synthetic_runs(tmp_path, with_gap=False)
     df = build_dataset(files["metrics"], files["health"], files["bench"], tmp_path / "dataset.csv")

@@ -92,17 +92,22 @@ def check_run(row: dict, level: str = "default", keep_supply_limited: bool = Fal
 
 
 def build_dataset(metrics_files, health_files, benchmark_files, out, level: str = "default",
-                  keep_supply_limited: bool = False) -> pd.DataFrame:
+                  keep_supply_limited: bool = False, points=None) -> pd.DataFrame:
     """Join per-run ``metrics.json``, ``health.json`` and Snakemake benchmark
     TSVs (same order) into ``out`` (CSV, written atomically), each run checked
     by :func:`check_run`.
+
+    ``points`` (one ``{input: value}`` per run, :attr:`analysis.config.Run.point`) gives each run's
+    inputs, first in its row: the run table, not the run's own file, says where a run sits in the
+    sweep (a run at the config's own value of an axis was written before the axis was swept).
 
     ``cpu_s`` is LIGGGHTS' own CPU time (user + system of the launched
     process and its ranks, ``health.json``); Snakemake's benchmark sampling
     misses part of it and gives only ``max_rss_MB`` and ``benchmark_cpu_s``."""
     rows = []
-    for metrics, health, bench in zip(metrics_files, health_files, benchmark_files, strict=True):
-        row = json.loads(Path(metrics).read_text())
+    points = [{}] * len(metrics_files) if points is None else points
+    for metrics, health, bench, point in zip(metrics_files, health_files, benchmark_files, points, strict=True):
+        row = {**point, **{k: v for k, v in json.loads(Path(metrics).read_text()).items() if k not in point}}
         h = json.loads(Path(health).read_text())
         row.update({key: h.get(key) for key in HEALTH})
         b = pd.read_csv(bench, sep="\t").iloc[-1]

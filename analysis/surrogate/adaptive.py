@@ -703,11 +703,14 @@ class WorkflowEvaluator:
         update_config(merged, round_cfg)
         return load_config(merged, base_dir=ROOT)
 
+    def run_table(self, points, config):
+        """The runs (:class:`analysis.config.Run`) of the points (b, k), every replicate, in ``config``."""
+        names = [*SPEED_AXES, *self.axes]
+        return runs_at(config, [dict(zip(names, p)) for p in np.atleast_2d(points).tolist()])
+
     def runs(self, points, config):
         """Run folder names (under ``runs/``) of the points (b, k), every replicate, in ``config``."""
-        names = [*SPEED_AXES, *self.axes]
-        return [run.name for run in runs_at(config, [dict(zip(names, p))
-                                                     for p in np.atleast_2d(points).tolist()])]
+        return [run.name for run in self.run_table(points, config)]
 
     def __call__(self, points):
         from analysis.metrics.dataset import build_dataset
@@ -720,7 +723,8 @@ class WorkflowEvaluator:
                            n_test=max(1, min(2, len(self.points) - 3)))
         with atomic_path(round_path) as tmp:
             tmp.write_text(yaml.safe_dump(cfg, sort_keys=False))
-        runs = self.runs(points, self.resolved(cfg))
+        table = self.run_table(points, self.resolved(cfg))
+        runs = [run.name for run in table]
         out = f"results/{self.level}"
         targets = [f"{out}/runs/{run}/metrics.json" for run in runs]
         log_path = self.workdir / f"results/logs/{self.level}/adaptive/{self.outdir.name}_round{self.calls}.log"
@@ -742,7 +746,7 @@ class WorkflowEvaluator:
         data = build_dataset([base / f"{out}/runs/{r}/metrics.json" for r in runs],
                              [base / f"{out}/runs/{r}/health.json" for r in runs],
                              [base / f"{bench}/spread/{r}.tsv" for r in runs],
-                             self.outdir / f"runs_round{self.calls}.csv")
+                             self.outdir / f"runs_round{self.calls}.csv", points=[run.point for run in table])
         self.calls += 1
         return data
 
