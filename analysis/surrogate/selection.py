@@ -285,8 +285,8 @@ def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=No
         if chosen in low:
             rule += "; **every candidate under-covers**, so the best R^2 is taken regardless"
     lines = [title, "",
-             f"Chosen: **{chosen}** ({CANDIDATES.get(chosen, chosen)}): {rule}. Folds are (U, omega) "
-             "points: the replicates of a point are left out together.", ""]
+             f"Chosen: **{chosen}** ({CANDIDATES.get(chosen, chosen)}): {rule}. Folds are points "
+             "(U, omega and any swept axis): the replicates of a point are left out together.", ""]
 
     def joined(values, f):
         return " / ".join("n/a" if not np.isfinite(v) else format(v, f) for v in values)

@@ -431,6 +431,11 @@ def process_map_figure(model, df, split, n=101, view=None, panels=None):
     fig, axes = _grid_fig(len(panels), "2d", size=(8.0, 6.5), layout="constrained")
     for ax, (v, pts, part), (a_values, b_values) in zip(axes, panels, iso):
         _draw_process_map(ax, model, v, pts, part, a_values, b_values, maxima, n, with_intervals)
+    if len(axes) > 1:      # panels on one scale: the same limits
+        for get, set_ in (("get_xlim", "set_xlim"), ("get_ylim", "set_ylim")):
+            limits = np.array([getattr(ax, get)() for ax in axes])
+            for ax in axes:
+                getattr(ax, set_)(limits[:, 0].min(), limits[:, 1].max())
     if with_intervals:
         _caption(fig, f"Crosses: the {_level(model)} interval of the indices of a single new run "
                  "(calibrated by grouped cross-conformal prediction on held-out runs; run-to-run noise included)")
