@@ -26,6 +26,9 @@ METRICS = {
 #: path, after these (:func:`input_columns`).
 INPUTS = {"U_mm_s": "mm/s", "omega_rad_s": "rad/s"}
 
+#: How text names the speeds; a swept config key is named by its dotted path.
+SHORT_NAMES = {"U_mm_s": "U", "omega_rad_s": "omega"}
+
 #: Units of a config key, from its name's ending (the config's convention); none: dimensionless.
 _UNIT_SUFFIXES = {"_mm_s": "mm/s", "_rad_s": "rad/s", "_kg_m3": "kg/m^3", "_J_m3": "J/m^3", "_Pa": "Pa",
                   "_mg_per_mm": "mg/mm", "_um": "um", "_mm": "mm", "_s": "s"}

@@ -68,7 +68,7 @@ from scipy.stats import qmc
 
 from analysis.config import PROJECT_DIR, SPEED_AXES, load_config, runs_at, sweep_axes
 from analysis.io import USER_ERRORS, atomic_path, error_line
-from analysis.metrics.dataset import METRICS, input_columns, input_units
+from analysis.metrics.dataset import METRICS, SHORT_NAMES, input_columns, input_units
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, targets_of
 from analysis.surrogate.intervals import calibrated_from_predictions, relative_noise
@@ -84,9 +84,6 @@ ACQUISITIONS = ("mepe", "imse")
 #: points of the IMSE reference grid over the design box: 21 x 21 over (U, omega); with more
 #: design dimensions about as many, ``round(441 ** (1 / d))`` per dimension
 REFERENCE_POINTS = 441
-
-#: how messages name the speeds
-SHORT_NAMES = {"U_mm_s": "U", "omega_rad_s": "omega"}
 
 #: entries of the largest (reference x candidate) block :func:`_variance_reduction` holds at once
 _BLOCK = 20_000_000

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.io import USER_ERRORS, error_line
-from analysis.metrics.dataset import METRICS
+from analysis.metrics.dataset import METRICS, SHORT_NAMES, input_units
 from analysis.surrogate.intervals import check_confidence
 from analysis.surrogate.persistence import load_surrogate
 from analysis.surrogate.predict import predict_frame, provides_intervals
@@ -191,12 +191,11 @@ def _predict_search_grid(model, meta, n, fixed, axis_points, confidence=None):
 
 def _range_text(meta, fixed=None):
     fixed, units = fixed or {}, meta.get("inputs") or {}
-    names = {"U_mm_s": "U", "omega_rad_s": "omega"}
     parts = []
     for name, (lo, hi) in meta["input_range"].items():
-        unit = units.get(name) or {"U_mm_s": "mm/s", "omega_rad_s": "rad/s"}.get(name, "")
+        unit = units.get(name) or input_units([name])[name]
         text = f"{fixed[name]:g}" if name in fixed else f"{lo:g}..{hi:g}"
-        parts.append(f"{names.get(name, name)} {text} {unit}".rstrip())
+        parts.append(f"{SHORT_NAMES.get(name, name)} {text} {unit}".rstrip())
     return ", ".join(parts)
 
 

@@ -32,7 +32,7 @@ from matplotlib.figure import Figure
 
 from analysis.config import variant_path
 from analysis.io import atomic_path
-from analysis.metrics.dataset import INPUTS, METRICS, input_columns, input_units, point_means
+from analysis.metrics.dataset import INPUTS, METRICS, SHORT_NAMES, input_columns, input_units, point_means
 from analysis.surrogate.data import inputs_of
 from analysis.surrogate.predict import (
     hybrid_indices,
@@ -374,7 +374,7 @@ def process_map_lines(model, U_values, omega_values, maxima, n=101, view=None):
     y = np.r_[np.repeat(a, n), np.tile(along_a, b.size)]
     x = np.r_[np.tile(along_b, a.size), np.repeat(b, n)]
     lines = view.frame(model, y, x)
-    families = [{"U_mm_s": "U", "omega_rad_s": "omega"}.get(c, c) for c in view.axes]
+    families = [SHORT_NAMES.get(c, c) for c in view.axes]
     lines.insert(0, "family", np.repeat(families, [a.size * n, b.size * n]))
     lines.insert(1, "value", np.r_[np.repeat(a, n), np.repeat(b, n)])
     lines["throughput_index"], lines["defect_index"] = hybrid_indices(lines, maxima)
