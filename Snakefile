@@ -1,5 +1,8 @@
 # spreadmap: DEM spreading simulations (LIGGGHTS) -> layer metrics -> surrogate -> process maps.
 # The method is the paper's spreading process maps (Figures 6-10); see README.md.
+import time
+from pathlib import Path
+
 from snakemake.utils import min_version
 
 # the analysis package is installed by the README's setup (pip install -e .)
@@ -39,6 +42,17 @@ localrules:
     maps,
     top_view,
     run_parameters,
+
+
+STARTED = time.time()
+
+
+onsuccess:
+    # one line on what the spreads cost (runs, CPU, particle-steps/s, wall time)
+    from analysis.metrics.dataset import workflow_summary
+
+    if Path(f"{OUT}/dataset.csv").is_file():
+        print(workflow_summary(f"{OUT}/dataset.csv", time.time() - STARTED))
 
 
 rule all:
