@@ -40,7 +40,7 @@ def trend_table(data: pd.DataFrame, roller_radius_mm: float,
         interior = np.mean((peak > 0) & (peak < back.shape[1] - 1)) if back.shape[1] > 2 else 0.0
         rows.append((f"{name} first rises then falls as negative omega grows in magnitude",
                      f"largest between omega = 0 and {back.columns[-1]:g} rad/s at omega = "
-                     + ", ".join(f"{w:g}" for w in back.columns[peak]) + f" (U = "
+                     + ", ".join(f"{w:g}" for w in back.columns[peak]) + " (U = "
                      + ", ".join(f"{u:g}" for u in back.index) + f"): inside the range at {interior:.0%} of the U",
                      _share_verdict(interior)))
     if "thickness_um" in mean:
