@@ -8,7 +8,7 @@ from analysis.io import atomic_path, write_json
 from analysis.rule import rule_context
 from analysis.surrogate.data import split_table
 from analysis.surrogate.intervals import calibrated_from_predictions, relative_noise
-from analysis.surrogate.network import fit_surrogate
+from analysis.surrogate.network import fit_surrogate, format_spread, test_r_spread
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import predict_grid
 from analysis.surrogate.scores import format_scores
@@ -19,6 +19,8 @@ with rule_context(snakemake):
     df = pd.read_csv(snakemake.input.dataset)
     _, scores = fit_surrogate(df, params)          # the paper's network: the reference scores
     print(format_scores(scores))
+    scores["test_spread"] = test_r_spread(df, params, params.get("test_splits", 20), n_jobs=snakemake.threads)
+    print(format_spread(scores["test_spread"]))
     name, table = read_choice(snakemake.input.choice)
     model, info = fit_chosen(df, params, name, scores["split"]["train"])
     held_out = pd.read_csv(snakemake.input.predictions)
