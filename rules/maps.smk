@@ -1,5 +1,5 @@
 rule maps:
-    """Figures 6-10: regressed surfaces, parity plots, the hybrid process map (over maps.axes)."""
+    """Figures 6-10: regressed surfaces, parity plots, the hybrid process map; contour maps, operating window."""
     input:
         model=rules.surrogate.output.model,
         dataset=rules.dataset.output[0],

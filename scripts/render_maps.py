@@ -1,4 +1,5 @@
-"""Snakemake entry: Figures 6-10 (surfaces, parity plots, process map) over maps.axes into a directory."""
+"""Snakemake entry: Figures 6-10 (surfaces, parity plots, process map), contour maps and the operating
+window over maps.axes into a directory."""
 
 import pandas as pd
 
@@ -12,5 +13,6 @@ with rule_context(snakemake):
     df = pd.read_csv(snakemake.input.dataset)
     maps = snakemake.params.maps
     for path in render_maps(model, df, read_split(snakemake.input.split, df), snakemake.output[0],
-                            axes=maps["axes"], hold=maps["hold"], panels=maps["panels"]):
+                            axes=maps["axes"], hold=maps["hold"], panels=maps["panels"],
+                            window=maps.get("operating_window")):
         print(path)
