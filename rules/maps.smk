@@ -16,6 +16,22 @@ rule maps:
         "../scripts/render_maps.py"
 
 
+rule front_page:
+    """The finished map's facts for the report's front page (report/workflow.rst includes them)."""
+    input:
+        model=rules.surrogate.output.model,
+        scores=rules.surrogate.output.scores,
+        choice=rules.model_choice.output.csv,
+    output:
+        f"{OUT}/front_page.rst",
+    log:
+        f"{LOGS}/front_page.log",
+    params:
+        window=CONFIG["maps"].get("operating_window"),
+    script:
+        "../scripts/front_page.py"
+
+
 rule top_view:
     """Top view of the sampling region, particles coloured by size (Figure 4)."""
     input:
