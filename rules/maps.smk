@@ -26,6 +26,8 @@ rule front_page:
         f"{OUT}/front_page.rst",
     log:
         f"{LOGS}/front_page.log",
+    benchmark:
+        f"{BENCH}/front_page.tsv"
     params:
         window=CONFIG["maps"].get("operating_window"),
     script:
