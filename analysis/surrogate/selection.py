@@ -155,7 +155,7 @@ def interval_scores(Y, preds, stds, repeats, rho, confidence):
             "std_coverage_pct": 100 * raw.mean(axis=(0, 1))}
 
 
-def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=False):
+def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=False, warm_loo=True):
     """Score every candidate of ``params["models"]`` by grouped cross-validation.
 
     Schemes: ``kfold``: ``cv_folds``-fold over the (U, omega) points, repeated
@@ -179,6 +179,10 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
         Folds fitted at once (joblib processes); the scores do not depend on it.
     return_predictions : bool
         Also return the held-out predictions.
+    warm_loo : bool
+        Warm-start the network's leave-one-point-out fits from the first repeat's k-fold
+        models (:func:`analysis.surrogate.candidates.refit_warm`); False: fresh fits, as the
+        k-fold's (benchmarks/bench_model_choice.py compares the two).
 
     Returns
     -------
@@ -208,8 +212,8 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
         schemes.append(("loo", [point_folds(df, n_points, 0)]))
     tasks = [(name, scheme, r, train, test) for name in p["models"] for scheme, repeats in schemes
              for r, splits in enumerate(repeats) for train, test in splits]
-    warm = [t[0] == "mlp" and t[1] == "loo" for t in tasks]     # warm-started from the k-fold's models
-    keep = [t[0] == "mlp" and t[1] == "kfold" and t[2] == 0 for t in tasks]
+    warm = [warm_loo and t[0] == "mlp" and t[1] == "loo" for t in tasks]     # started from the k-fold's models
+    keep = [warm_loo and t[0] == "mlp" and t[1] == "kfold" and t[2] == 0 for t in tasks]
     fresh = Parallel(n_jobs=n_jobs)(delayed(_fold)(name, p, X, Y, train, test, keep=k)
                                     for (name, _, _, train, test), w, k in zip(tasks, warm, keep) if not w)
     fresh = iter(fresh)
