@@ -36,7 +36,7 @@ def test_front_page_states_the_window_the_choice_and_the_spread():
     assert "porosity <= 60 % and roughness R_q <= 90 um" in text
     assert "**U = 85 mm/s, omega = -5 rad/s**" in text and "812 of 40401" in text
     assert "**mlp**" in text and "+- 0.0100" in text and "tied with it: mlp 0.9197" in text
-    assert "over 20 seeded splits" in text and "M_s 0.950 +- 0.020 (0.900-0.980)" in text
+    assert "over 20 seeded splits" in text and "M_s 0.950 +- 0.020 (0.900 to 0.980)" in text
     none = front_page_rst(_scores(), _choice(), WINDOW, None, "the predicted mean")
     assert "No setting in the swept range meets them" in none
 

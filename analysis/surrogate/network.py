@@ -355,4 +355,4 @@ def format_spread(spread):
     """One line: the mean test R +- its sd (min-max) per metric over the splits."""
     return (f"paper's network, test R over {spread['n_splits']} seeded {spread['n_test']}-point test splits: "
             + "; ".join(f"{METRICS[m][0]} {spread[m]['R_mean']:.3f} +- {spread[m]['R_sd']:.3f} "
-                        f"({spread[m]['R_min']:.3f}-{spread[m]['R_max']:.3f})" for m in METRICS))
+                        f"({spread[m]['R_min']:.3f} to {spread[m]['R_max']:.3f})" for m in METRICS))

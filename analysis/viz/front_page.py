@@ -79,15 +79,18 @@ def front_page_rst(scores, choice, window=None, found=None, rule=""):
               f"R^2 ({symbols}): " + " / ".join(f"{v:.3f}" for v in chosen_kfold.set_index("metric").loc[
                   list(METRICS), "R2"]) + " (``surrogate/model_choice.md``).", ""]
     test = scores["test"]
-    lines.append("**The paper's network** (Table 2) on the paper's 35/10 split by point, test R "
-                 f"({symbols}): " + " / ".join("n/a" if test[m]["R"] is None else f"{test[m]['R']:.3f}"
+    split = scores.get("split", {"n_train": 35, "n_test": 10})
+    lines.append(f"**The paper's network** (Table 2) on the seeded {split['n_train']}/{split['n_test']}-run split "
+                 f"by point (the paper's: 35/10), test R ({symbols}): " + " / ".join("n/a" if test[m]["R"] is None else f"{test[m]['R']:.3f}"
                                                for m in METRICS) + " (the paper: >= 0.96).")
     spread = scores.get("test_spread")
     if spread:
         lines[-1] += (f" One split is a noisy figure: over {spread['n_splits']} seeded splits its test R is "
                       + "; ".join(f"{METRICS[m][0]} {spread[m]['R_mean']:.3f} +- {spread[m]['R_sd']:.3f} "
-                                  f"({spread[m]['R_min']:.3f}-{spread[m]['R_max']:.3f})" for m in METRICS)
-                      + " (mean +- sd, min-max; ``surrogate/scores.json``, ``test_spread``).")
+                                  f"({spread[m]['R_min']:.3f} to {spread[m]['R_max']:.3f})" for m in METRICS)
+                      + " (mean +- sd, min to max; ``surrogate/scores.json``, ``test_spread``)."
+                      + (" The R of two test runs is +-1 whatever the fit: too few to score." if
+                         spread.get("n_test", 10) < 3 else ""))
     lines.append("")
     return "\n".join(lines)
 

@@ -363,9 +363,9 @@ def window_figure(model, df, split, max_porosity_pct=None, max_roughness_um=None
 
     panels = panels or _panels(view, df, split)
     with_intervals = provides_intervals(model) and model.is_finite()
-    rule = (f"the upper end of the {_level(model)} single-run interval" if with_intervals
-            else "the predicted mean (no finite interval: " + (_too_few(model) if provides_intervals(model)
-                                                               else "the model has no calibrated intervals") + ")")
+    rule = (f"the upper end of the {_level(model)} single-run interval meets every limit" if with_intervals
+            else "the predicted mean meets every limit (no finite interval: " + (
+                _too_few(model) if provides_intervals(model) else "the model has no calibrated intervals") + ")")
     limits = ([] if max_porosity_pct is None else [f"$\\Phi$ ≤ {max_porosity_pct:g} %"]) + \
         ([] if max_roughness_um is None else [f"$R_q$ ≤ {max_roughness_um:g} $\\mu$m"])
     fig, axes = _grid_fig(len(panels), "2d", size=(7.8, 6.6), layout="constrained")
@@ -390,7 +390,8 @@ def window_figure(model, df, split, max_porosity_pct=None, max_roughness_um=None
             if edge.min() < limit < edge.max():
                 ax.contour(X, Y, edge, levels=[limit], colors="k", linestyles=style, linewidths=1.4)
         handles = [Patch(color="#b7e4a7", label="operating window: " + " and ".join(limits)),
-                   Patch(color="0.82", label="outside: a run there may exceed a limit"),
+                   Patch(color="0.82", label="outside: a run there may exceed a limit" if with_intervals
+                         else "outside: the predicted mean exceeds a limit"),
                    Line2D([], [], color="0.35", lw=0.7, label="predicted $Q_s$ (mm$^2$/s)")]
         handles += [Line2D([], [], color="k", ls=style, label=f"{name} limit")
                     for name, limit, style in (("porosity", max_porosity_pct, "--"),
@@ -415,12 +416,11 @@ def window_figure(model, df, split, max_porosity_pct=None, max_roughness_um=None
         run_handles, _ = ax.get_legend_handles_labels()
         ax.legend(handles=handles + run_handles, loc="upper left", bbox_to_anchor=(0.0, -0.1), fontsize=8,
                   frameon=False)
-        ax.set(xlabel=axis_label(xa), ylabel=axis_label(ya),
-               title=f"Operating window: {' and '.join(limits) or 'no limits'}"
-               + (f" in {_level(model)} of runs" if with_intervals else " on the mean")
-               + (f"\n{v.title()}" if v.title() else ""))
-        ax.title.set_y(1.02)            # clear of a star on the top edge
-    _caption(fig, f"In the window, {rule} meets every limit (analysis.surrogate.recommend's rule; "
+        ax.set(xlabel=axis_label(xa), ylabel=axis_label(ya))
+        ax.set_title(f"Operating window: {' and '.join(limits) or 'no limits'}"
+                     + (f" in {_level(model)} of runs" if with_intervals else " on the mean")
+                     + (f"\n{v.title()}" if v.title() else ""), pad=14)     # clear of a star on the top edge
+    _caption(fig, f"In the window, {rule}: analysis.surrogate.recommend's rule ("
              "spreadmap-recommend prints the same setting from a finer grid). Limits: config maps.operating_window.")
     return fig
 
