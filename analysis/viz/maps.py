@@ -161,6 +161,13 @@ def _panels(view, df, split):
     return [(view or MapView(inputs=tuple(input_columns(df))), df, split)]
 
 
+def _panel_grids(model, df, split, view, panels, n, metric):
+    """The panels (:func:`_panels` unless given), each one's n x n grid, and ``metric``'s range over all."""
+    panels = panels or _panels(view, df, split)
+    grids = [v.grid(model, *v.ranges(pts), n) for v, pts, _ in panels]
+    return panels, grids, (min(g[metric].min() for g in grids), max(g[metric].max() for g in grids))
+
+
 def _grid_fig(k, kind, **kwargs):
     """A figure of ``k`` panels side by side (3-D axes for ``kind`` '3d'); returns (fig, axes)."""
     width, height = kwargs.pop("size")
@@ -193,9 +200,7 @@ def surface_figure(model, df, split, metric, n=41, view=None, panels=None):
     -------
     matplotlib.figure.Figure
     """
-    panels = panels or _panels(view, df, split)
-    grids = [v.grid(model, *v.ranges(pts), n) for v, pts, _ in panels]
-    lo, hi = min(g[metric].min() for g in grids), max(g[metric].max() for g in grids)
+    panels, grids, (lo, hi) = _panel_grids(model, df, split, view, panels, n, metric)
     fig, axes = _grid_fig(len(panels), "3d", size=(8.0, 6.5))
     for ax, (v, pts, part), grid in zip(axes, panels, grids):
         (ya, xa), shape = v.axes, (n, n)
@@ -315,9 +320,7 @@ def contour_figure(model, df, split, metric, n=61, view=None, panels=None):
     -------
     matplotlib.figure.Figure
     """
-    panels = panels or _panels(view, df, split)
-    grids = [v.grid(model, *v.ranges(pts), n) for v, pts, _ in panels]
-    lo, hi = min(g[metric].min() for g in grids), max(g[metric].max() for g in grids)
+    panels, grids, (lo, hi) = _panel_grids(model, df, split, view, panels, n, metric)
     levels = MaxNLocator(12).tick_values(lo, hi)
     fig, axes = _grid_fig(len(panels), "2d", size=(7.5, 6.2), layout="constrained")
     for ax, (v, pts, part), grid in zip(axes, panels, grids):
