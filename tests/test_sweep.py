@@ -172,7 +172,7 @@ def _jobs(dry_run_text):
 
 #: The workflow's rules in the order their outputs are made.
 RULE_ORDER = ("geometry", "settle", "spread", "layer_metrics", "run_parameters", "top_view", "deposit_profile",
-              "dataset", "trends", "noise_floor", "model_choice", "surrogate", "maps")
+              "dataset", "trends", "noise_floor", "model_choice", "surrogate", "maps", "front_page")
 
 
 def _stand_in_outputs(workdir, dry_run_text):
