@@ -81,8 +81,9 @@ def front_page_rst(scores, choice, window=None, found=None, rule=""):
     test = scores["test"]
     split = scores.get("split", {"n_train": 35, "n_test": 10})
     lines.append(f"**The paper's network** (Table 2) on the seeded {split['n_train']}/{split['n_test']}-run split "
-                 f"by point (the paper's: 35/10), test R ({symbols}): " + " / ".join("n/a" if test[m]["R"] is None else f"{test[m]['R']:.3f}"
-                                               for m in METRICS) + " (the paper: >= 0.96).")
+                 f"by point (the paper's: 35/10), test R ({symbols}): "
+                 + " / ".join("n/a" if test[m]["R"] is None else f"{test[m]['R']:.3f}" for m in METRICS)
+                 + " (the paper: >= 0.96).")
     spread = scores.get("test_spread")
     if spread:
         lines[-1] += (f" One split is a noisy figure: over {spread['n_splits']} seeded splits its test R is "
