@@ -4,6 +4,7 @@ rule maps:
         model=rules.surrogate.output.model,
         dataset=rules.dataset.output[0],
         split=rules.surrogate.output.split,
+        predictions=rules.model_choice.output.predictions,  # a smooth model's lines when trees are chosen
     output:
         report(directory(f"{OUT}/maps"), patterns=["{name}.png"], caption="../report/maps.rst", category="Process maps"),
     log:
@@ -12,6 +13,7 @@ rule maps:
         f"{BENCH}/maps.tsv"
     params:
         maps=CONFIG["maps"],
+        surrogate=CONFIG["surrogate"],
     script:
         "../scripts/render_maps.py"
 

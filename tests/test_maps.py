@@ -194,3 +194,18 @@ def test_contour_map_shows_the_runs(calibrated_gp):
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert labels == ["simulated training runs (35)", "simulated test runs (10)"]
     assert fig.axes[0].get_xlabel().startswith(r"$\omega$") and fig.axes[0].get_ylabel().startswith("$U$")
+
+
+def test_a_smooth_model_draws_the_lines_when_the_trees_are_chosen(fit_params):
+    from analysis.surrogate.selection import cross_validate_models, smooth_stand_in
+    from analysis.viz.maps import process_map_figure
+    df = synthetic_dataset(2, noise=0.03)
+    params = {**fit_params, "models": ["trees", "gp"], "cv_repeats": 1, "cv_loo": False, "gp_restarts": 0,
+              "tree_count": 20}
+    _, held_out = cross_validate_models(df, params, return_predictions=True)
+    train = np.arange(35)
+    assert smooth_stand_in(df, params, "gp", train, held_out) == (None, None)
+    smooth, name = smooth_stand_in(df, params, "trees", train, held_out)
+    assert name == "gp" and isinstance(smooth.model, GPSurrogate) and smooth.is_finite()
+    fig = process_map_figure(smooth, df, (train, np.arange(35, 45)), n=31, note="Iso-lines of the gp")
+    assert fig._supxlabel.get_text().startswith("Iso-lines of the gp. Grey crosses")

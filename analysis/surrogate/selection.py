@@ -52,6 +52,7 @@ from analysis.surrogate.candidates import CANDIDATES, GPSurrogate, make_candidat
 from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, targets_of
 from analysis.surrogate.intervals import (
     calibrate,
+    calibrated_from_predictions,
     check_confidence,
     conformal_quantile,
     interval_score,
@@ -493,6 +494,31 @@ def fit_chosen(df, params, name, train_idx=None):
                                 for m, ls in zip(METRICS, model.length_scales_)}
         info["noise_std"] = {m: float(s) for m, s in zip(METRICS, model.noise_std_)}
     return model, info
+
+
+def fit_calibrated(df, params, name, train_idx, predictions):
+    """Candidate ``name`` fitted on the runs ``train_idx`` (:func:`fit_chosen`), its intervals calibrated
+    on its k-fold held-out predictions (``predictions``: cv_predictions.csv, every candidate's).
+
+    Returns (the :class:`analysis.surrogate.intervals.CalibratedSurrogate`, :func:`fit_chosen`'s info,
+    the noise's source as text).
+    """
+    model, info = fit_chosen(df, params, name, train_idx)
+    held_out = predictions[(predictions["model"] == name) & (predictions["scheme"] == "kfold")]
+    rho, source = relative_noise(df, random_state=int(params["random_state"]))
+    return calibrated_from_predictions(model, held_out, df, rho, params["confidence"], source), info, source
+
+
+def smooth_stand_in(df, params, name, train_idx, predictions):
+    """For the process map's iso-lines: None when ``name`` is a smooth model (:data:`SMOOTH`), else the
+    first smooth candidate of ``params["models"]`` (the GP if none is listed), fitted and calibrated as
+    the chosen model is (:func:`fit_calibrated`), and its name."""
+    if name in SMOOTH:
+        return None, None
+    smooth = next((m for m in params["models"] if m in SMOOTH), "gp")
+    if smooth not in set(predictions["model"]):
+        return None, None
+    return fit_calibrated(df, params, smooth, train_idx, predictions)[0], smooth
 
 
 def chosen_summary(model, info, df, split, table):

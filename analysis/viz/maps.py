@@ -537,7 +537,7 @@ def iso_values(df, n_U=5, n_omega=9, axes=tuple(INPUTS)):
 _DECIMALS = {"U_mm_s": 1, "omega_rad_s": 2}
 
 
-def process_map_figure(model, df, split, n=101, view=None, panels=None):
+def process_map_figure(model, df, split, n=101, view=None, panels=None, note=None):
     """The spreading process map of the paper's Figure 10.
 
     The metric maxima are those of the surrogate on an n x n grid over the swept range (of
@@ -561,6 +561,8 @@ def process_map_figure(model, df, split, n=101, view=None, panels=None):
         Grid points per axis and points per line.
     view, panels
         As :func:`surface_figure`'s.
+    note : str, optional
+        A sentence for the caption (e.g. which model draws the lines).
 
     Returns
     -------
@@ -581,12 +583,15 @@ def process_map_figure(model, df, split, n=101, view=None, panels=None):
         ax.set_xlim(0, right)
         ax.set_ylim(0, upper)
     axes[-1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0)
+    caption = [note] if note else []
     if with_intervals:
-        _caption(fig, f"Grey crosses: the {_level(model)} interval of the indices of a single new run at each "
-                 "simulated setting (calibrated by grouped cross-conformal prediction on held-out runs; "
-                 "run-to-run noise included)")
+        caption.append(f"Grey crosses: the {_level(model)} interval of the indices of a single new run at each "
+                       "simulated setting (calibrated by grouped cross-conformal prediction on held-out runs; "
+                       "run-to-run noise included)")
     elif provides_intervals(model):
-        _caption(fig, f"No interval crosses: {_too_few(model)}")
+        caption.append(f"No interval crosses: {_too_few(model)}")
+    if caption:
+        _caption(fig, ". ".join(caption))
     fig.canvas.draw()                  # the layout settles; then it is frozen, so labels placed stay put
     fig.set_layout_engine("none")
     fig.line_labels = [text for ax, (lines, runs) in zip(axes, drawn) for text in place_labels(ax, lines, runs)]
@@ -773,7 +778,8 @@ def map_views(points, axes=tuple(INPUTS), hold=None, panels=None):
     return sets
 
 
-def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, panels=None, window=None):
+def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, panels=None, window=None,
+                lines_model=None, lines_note=None):
     """Write every figure: surfaces, parity plots, process map (and uncertainty maps).
 
     The maps span two inputs (``axes``, default the paper's U and omega); the model's other
@@ -801,6 +807,9 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
     window : dict, optional
         ``max_porosity_pct`` and ``max_roughness_um`` (None: no limit) of the operating window
         (config ``maps.operating_window``); None: no window map.
+    lines_model : estimator, optional
+        Draws the process map instead of ``model`` (a smooth model's iso-lines when the chosen
+        one is piecewise flat), ``lines_note`` saying so in its caption.
 
     Returns
     -------
@@ -832,8 +841,8 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
                 if provides_intervals(model):
                     paths += save_figure(interval_figure(model, None, None, metric, n, panels=drawn), where,
                                          f"{metric}_interval")
-            paths += save_figure(process_map_figure(model, None, None, max(n, 101), panels=drawn), where,
-                                 "process_map")
+            paths += save_figure(process_map_figure(lines_model or model, None, None, max(n, 101), panels=drawn,
+                                                    note=lines_note), where, "process_map")
             if window is not None:
                 paths += save_figure(window_figure(model, None, None, window.get("max_porosity_pct"),
                                                    window.get("max_roughness_um"), panels=drawn),
