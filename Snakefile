@@ -14,6 +14,9 @@ min_version("9.0")
 configfile: "config.yaml"
 
 
+report: "report/workflow.rst"  # the report's front page
+
+
 config.update(coerce_cli_values(config))  # --config values arrive as strings
 
 
@@ -40,6 +43,7 @@ localrules:
     model_choice,
     surrogate,
     maps,
+    front_page,
     top_view,
     run_parameters,
 
@@ -65,6 +69,7 @@ rule all:
         f"{OUT}/surrogate/scores.json",
         f"{OUT}/surrogate/grid.csv",
         f"{OUT}/maps",
+        f"{OUT}/front_page.rst",
         expand(f"{OUT}/runs/{{run}}/final.vtp", run=RUNS),
         rules.run_parameters.output,
         TOP_VIEWS,

@@ -1,9 +1,10 @@
 rule maps:
-    """Figures 6-10: regressed surfaces, parity plots, the hybrid process map (over maps.axes)."""
+    """Figures 6-10: regressed surfaces, parity plots, the hybrid process map; contour maps, operating window."""
     input:
         model=rules.surrogate.output.model,
         dataset=rules.dataset.output[0],
         split=rules.surrogate.output.split,
+        predictions=rules.model_choice.output.predictions,  # a smooth model's lines when trees are chosen
     output:
         report(directory(f"{OUT}/maps"), patterns=["{name}.png"], caption="../report/maps.rst", category="Process maps"),
     log:
@@ -12,8 +13,27 @@ rule maps:
         f"{BENCH}/maps.tsv"
     params:
         maps=CONFIG["maps"],
+        surrogate=CONFIG["surrogate"],
     script:
         "../scripts/render_maps.py"
+
+
+rule front_page:
+    """The finished map's facts for the report's front page (report/workflow.rst includes them)."""
+    input:
+        model=rules.surrogate.output.model,
+        scores=rules.surrogate.output.scores,
+        choice=rules.model_choice.output.csv,
+    output:
+        f"{OUT}/front_page.rst",
+    log:
+        f"{LOGS}/front_page.log",
+    benchmark:
+        f"{BENCH}/front_page.tsv"
+    params:
+        window=CONFIG["maps"].get("operating_window"),
+    script:
+        "../scripts/front_page.py"
 
 
 rule top_view:

@@ -50,6 +50,7 @@ rule surrogate:
         f"{LOGS}/surrogate.log",
     benchmark:
         f"{BENCH}/surrogate.tsv"
+    threads: 4  # the network refitted on surrogate.test_splits splits at once; capped at --cores
     params:
         surrogate=CONFIG["surrogate"],
         grid_points=CONFIG["surrogate"]["grid_points"],

@@ -7,24 +7,22 @@ import pandas as pd
 from analysis.io import atomic_path, write_json
 from analysis.rule import rule_context
 from analysis.surrogate.data import split_table
-from analysis.surrogate.intervals import calibrated_from_predictions, relative_noise
-from analysis.surrogate.network import fit_surrogate
+from analysis.surrogate.network import fit_surrogate, format_spread, test_r_spread
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import predict_grid
 from analysis.surrogate.scores import format_scores
-from analysis.surrogate.selection import chosen_summary, fit_chosen, read_choice
+from analysis.surrogate.selection import chosen_summary, fit_calibrated, read_choice
 
 with rule_context(snakemake):
     out, params = snakemake.output, snakemake.params.surrogate
     df = pd.read_csv(snakemake.input.dataset)
     _, scores = fit_surrogate(df, params)          # the paper's network: the reference scores
     print(format_scores(scores))
+    scores["test_spread"] = test_r_spread(df, params, params.get("test_splits", 20), n_jobs=snakemake.threads)
+    print(format_spread(scores["test_spread"]))
     name, table = read_choice(snakemake.input.choice)
-    model, info = fit_chosen(df, params, name, scores["split"]["train"])
-    held_out = pd.read_csv(snakemake.input.predictions)
-    held_out = held_out[(held_out["model"] == name) & (held_out["scheme"] == "kfold")]
-    rho, source = relative_noise(df, random_state=int(params["random_state"]))
-    model = calibrated_from_predictions(model, held_out, df, rho, params["confidence"], source)
+    model, info, source = fit_calibrated(df, params, name, scores["split"]["train"],
+                                         pd.read_csv(snakemake.input.predictions))
     scores["model"] = {**chosen_summary(model, info, df, scores["split"], table), "intervals": model.summary()}
     print(f"intervals: {model.method}; {100 * model.confidence:g} % multiplier "
           + " / ".join(f"{q:.2f}" for q in model.multiplier()[:4]) + f"; noise: {source}")

@@ -6,9 +6,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import synthetic_dataset, synthetic_metrics
 
 from analysis.metrics.dataset import METRICS
-from analysis.surrogate.data import split_table
+from analysis.surrogate.candidates import GPSurrogate
+from analysis.surrogate.data import inputs_of, split_table, targets_of
+from analysis.surrogate.intervals import CalibratedSurrogate
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import hybrid_indices, metric_maxima, predict_grid
 from analysis.viz.maps import process_map_lines, render_maps
@@ -56,9 +59,11 @@ def test_process_map_lines_meet_at_the_swept_runs(fitted):
     assert lines["throughput_index"].max() <= 1 + 1e-9
 
 
-def _check_figures(paths, outdir):
-    expected = {f"{m}_{kind}.{ext}" for m in METRICS for kind in ("surface", "parity")
+def _check_figures(paths, outdir, window=False):
+    expected = {f"{m}_{kind}.{ext}" for m in METRICS for kind in ("surface", "contour", "parity")
                 for ext in ("png", "svg")} | {"process_map.png", "process_map.svg"}
+    if window:
+        expected |= {"operating_window.png", "operating_window.svg"}
     assert {p.name for p in paths} == expected
     assert {p.name for p in Path(outdir).iterdir()} == expected        # no temporaries
     for path in paths:
@@ -89,10 +94,11 @@ def test_render_maps_script(fitted, dataset, tmp_path, fake_snakemake):
                                   "dataset": str(tmp_path / "dataset.csv"),
                                   "split": str(tmp_path / "split.csv")},
                            {"maps": str(tmp_path / "maps")},
-                           {"maps": {"axes": ["U_mm_s", "omega_rad_s"], "hold": {}, "panels": None}})
+                           {"maps": {"axes": ["U_mm_s", "omega_rad_s"], "hold": {}, "panels": None,
+                                     "operating_window": {"max_porosity_pct": 50, "max_roughness_um": None}}})
     runpy.run_path(str(smk.scriptdir / "render_maps.py"), init_globals={"snakemake": smk})
     paths = sorted((tmp_path / "maps").iterdir())
-    _check_figures(paths, tmp_path / "maps")
+    _check_figures(paths, tmp_path / "maps", window=True)
 
 
 def test_supply_limited_runs_are_ringed_on_the_surfaces_and_the_process_map(fitted, dataset):
@@ -108,3 +114,98 @@ def test_supply_limited_runs_are_ringed_on_the_surfaces_and_the_process_map(fitt
     legend = surface_figure(model, dataset, split, "mass_g", n=11).axes[0].get_legend()
     labels = [t.get_text() for t in legend.get_texts()]
     assert not any("supply-limited" in label for label in labels)
+
+
+# --- Figure 10 legible, the operating window ---------------------------------------------
+
+def _shifted(U, omega):
+    """The synthetic metrics with eq. 7's porosity pushed below 0 at positive omega (as a deep deposit does)."""
+    metrics = synthetic_metrics(U, omega)
+    return {**metrics, "porosity_pct": metrics["porosity_pct"] - 45}
+
+
+@pytest.fixture(scope="module")
+def calibrated_gp():
+    """A GP on 45 runs (2 % noise) whose porosity goes negative, calibrated by hand; and its runs."""
+    df = synthetic_dataset(1, noise=0.02, metrics=_shifted)
+    gp = GPSurrogate(n_restarts=0).fit(inputs_of(df), targets_of(df))
+    scores = np.abs(np.random.default_rng(0).standard_normal((45, 6)))
+    return CalibratedSurrogate(gp, np.ones(6), np.full(6, 0.02), scores, 45, 0.9, "by hand"), df
+
+
+def _overlaps(a, b):
+    return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
+
+
+@pytest.mark.parametrize("which", ["network", "negative porosity"])
+def test_process_map_labels_overlap_no_label_and_no_line(which, fitted, dataset, calibrated_gp):
+    from matplotlib.path import Path as MplPath
+
+    from analysis.viz.maps import process_map_figure
+    model, df = (fitted[0], dataset) if which == "network" else calibrated_gp
+    fig = process_map_figure(model, df, (np.arange(35), np.arange(35, 45)), n=61)
+    ax = fig.axes[0]
+    renderer = fig.canvas.get_renderer()
+    boxes = [t.get_window_extent(renderer) for t in fig.line_labels]
+    assert len(boxes) >= (14 if which == "network" else 10)       # 5 iso-U + 9 iso-omega lines
+    assert {t.get_text() for t in fig.line_labels} <= {f"U={u}" for u in (40, 55, 70, 85, 100)} | {
+        f"ω={w}" for w in range(-20, 21, 5)}
+    for i, a in enumerate(boxes):
+        assert not any(_overlaps(a, b) for b in boxes[i + 1:]), fig.line_labels[i].get_text()
+        assert frame_contains(ax.get_window_extent(renderer), a)
+    lines = [line for line in ax.get_lines() if len(line.get_xydata()) > 2]
+    assert len(lines) == 14
+    for line in lines:
+        path = MplPath(ax.transData.transform(line.get_xydata()))
+        assert not any(path.intersects_bbox(box, filled=False) for box in boxes)
+        assert (line.get_xydata()[:, 1] >= 0).all()                # the defect index, from max(Phi, 0)
+    assert ax.get_xlim()[0] == 0 and ax.get_ylim()[0] == 0
+    assert "max(\\Phi, 0)" in ax.get_ylabel()
+    if which == "negative porosity":
+        assert (model.predict(inputs_of(df))[:, 3] < 0).any()       # eq. 7's Phi is negative somewhere
+
+
+def frame_contains(frame, box):
+    return frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+
+
+def test_operating_window_marks_the_recommended_setting(calibrated_gp):
+    from analysis.surrogate.recommend import recommend
+    from analysis.viz.maps import window_figure
+    model, df = calibrated_gp
+    split = (np.arange(35), np.arange(35, 45))
+    meta = {"input_range": {"U_mm_s": [40.0, 100.0], "omega_rad_s": [-20.0, 20.0]}}
+    found = recommend(model, meta, 8, 60, n=121)
+    fig = window_figure(model, df, split, 8, 60, n=121)
+    best = fig.recommended[0]
+    assert (best["U_mm_s"], best["omega_rad_s"]) == pytest.approx((found["U_mm_s"], found["omega_rad_s"]))
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert any(label.startswith("recommended: U = ") for label in labels)
+    assert "90 % of runs" in fig.axes[0].get_title()
+    none = window_figure(model, df, split, None, 1.0, n=21)      # R_q <= 1 um: nowhere
+    assert none.recommended == [None]
+    assert any("no setting meets the limits" in t.get_text() for t in none.axes[0].texts)
+
+
+def test_contour_map_shows_the_runs(calibrated_gp):
+    from analysis.viz.maps import contour_figure
+    model, df = calibrated_gp
+    fig = contour_figure(model, df, (np.arange(35), np.arange(35, 45)), "roughness_um", n=21)
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert labels == ["simulated training runs (35)", "simulated test runs (10)"]
+    assert fig.axes[0].get_xlabel().startswith(r"$\omega$") and fig.axes[0].get_ylabel().startswith("$U$")
+
+
+def test_a_smooth_model_draws_the_lines_when_the_trees_are_chosen(fit_params):
+    from analysis.surrogate.selection import cross_validate_models, smooth_stand_in
+    from analysis.viz.maps import process_map_figure
+    df = synthetic_dataset(2, noise=0.03)
+    params = {**fit_params, "models": ["trees", "gp"], "cv_repeats": 1, "cv_loo": False, "gp_restarts": 0,
+              "tree_count": 20}
+    _, held_out = cross_validate_models(df, params, return_predictions=True)
+    train = np.arange(35)
+    assert smooth_stand_in(df, params, "gp", train, held_out) == (None, None)
+    smooth, name = smooth_stand_in(df, params, "trees", train, held_out)
+    assert name == "gp" and isinstance(smooth.model, GPSurrogate) and smooth.is_finite()
+    fig = process_map_figure(smooth, df, (train, np.arange(35, 45)), n=31, note="Iso-lines of the gp")
+    assert fig._supxlabel.get_text().startswith("Iso-lines of the gp. Grey crosses")

@@ -171,7 +171,7 @@ def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
     data = synthetic_dataset(0, noise=0.01)
     data.to_csv(tmp_path / "dataset.csv", index=False)
     params = {**fit_params, "grid_points": 11, "models": ["gp"],
-              "cv_repeats": 1, "cv_loo": False}
+              "cv_repeats": 1, "cv_loo": False, "test_splits": 3}
     table, held_out = cross_validate_models(data, params, return_predictions=True)
     write_model_choice(table, "gp", tmp_path / "choice.csv", tmp_path / "choice.md",
                        predictions=held_out, predictions_path=tmp_path / "cv.csv")
@@ -186,6 +186,11 @@ def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
 
     scores = json.loads(Path(out["scores"]).read_text())
     assert min(s["R"] for s in scores["test"].values()) >= R_TARGET       # the paper's network
+    spread = scores["test_spread"]                 # ... and its test R over seeded splits, the first the same
+    assert spread["n_splits"] == 3 and spread["seeds"] == [0, 1, 2]
+    for m in METRICS:
+        assert spread[m]["R"][0] == pytest.approx(scores["test"][m]["R"])
+        assert spread[m]["R_min"] <= spread[m]["R_mean"] <= spread[m]["R_max"] and spread[m]["R_sd"] >= 0
     assert scores["model"]["name"] == "gp" and scores["model"]["n_train"] == 35
     assert min(s["R"] for s in scores["model"]["test"].values()) >= R_TARGET
     assert set(scores["model"]["cv"]["kfold"]) == set(METRICS)
@@ -203,7 +208,7 @@ def test_fit_surrogate_script(tmp_path, fit_params, fake_snakemake):
     assert "cross-conformal" in meta["model"]["intervals"]["method"]
     assert meta["split"]["test"] == split.index[split["set"] == "test"].tolist()
     log = (tmp_path / "rule.log").read_text()
-    assert "converged" in log and "chosen by cross-validation: gp" in log
+    assert "converged" in log and "chosen by cross-validation: gp" in log and "over 3 seeded 10-point" in log
 
 
 def test_hybrid_indices_against_hand_computed_values():

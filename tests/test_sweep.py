@@ -172,7 +172,7 @@ def _jobs(dry_run_text):
 
 #: The workflow's rules in the order their outputs are made.
 RULE_ORDER = ("geometry", "settle", "spread", "layer_metrics", "run_parameters", "top_view", "deposit_profile",
-              "dataset", "trends", "noise_floor", "model_choice", "surrogate", "maps")
+              "dataset", "trends", "noise_floor", "model_choice", "surrogate", "maps", "front_page")
 
 
 def _stand_in_outputs(workdir, dry_run_text):
@@ -339,12 +339,15 @@ def test_maps_over_a_third_axis_are_drawn_per_value(gap_model, tmp_path):
     from analysis.surrogate.data import split_runs
     from analysis.viz.maps import render_maps
     model, _, df = gap_model
-    paths = render_maps(model, df, split_runs(df, 10, 0), tmp_path / "maps", n=11)
+    paths = render_maps(model, df, split_runs(df, 10, 0), tmp_path / "maps", n=11,
+                        window={"max_porosity_pct": 40, "max_roughness_um": None})
     names = {str(p.relative_to(tmp_path / "maps")) for p in paths}
     assert "mass_g_parity.png" in names                         # parity: every point, once
     for gap in (300, 350, 400):
         assert f"roller.gap_um={gap}/mass_g_surface.png" in names
+        assert f"roller.gap_um={gap}/mass_g_contour.png" in names
         assert f"roller.gap_um={gap}/process_map.png" in names
+        assert f"roller.gap_um={gap}/operating_window.png" in names
     assert not any(n.startswith("roller.gap_um=300/") and "parity" in n for n in names)
 
 
@@ -384,9 +387,10 @@ def test_maps_over_a_chosen_pair_hold_or_panel_the_other_inputs(gap_model, tmp_p
     with pytest.raises(ValueError, match="'material.restitution' is not an input"):
         map_views(points, ("U_mm_s", "material.restitution"))
     split = split_runs(df, 10, 0)
-    paths = render_maps(model, df, split, tmp_path / "maps", n=9, panels="roller.gap_um")
+    paths = render_maps(model, df, split, tmp_path / "maps", n=9, panels="roller.gap_um",
+                        window={"max_porosity_pct": 40, "max_roughness_um": 70})
     names = {str(p.relative_to(tmp_path / "maps")) for p in paths}
-    assert {"process_map.png", "mass_g_surface.png", "mass_g_parity.png"} <= names
+    assert {"process_map.png", "mass_g_surface.png", "mass_g_parity.png", "operating_window.png"} <= names
     assert not any("/" in n for n in names)                          # one set, in maps/ itself
     views = [(v, points.iloc[rows].reset_index(drop=True), (np.arange(len(rows)), np.array([], int)))
              for v, rows in panels[0][1]]

@@ -6,6 +6,7 @@ builds one by name. :mod:`analysis.surrogate.selection` chooses among them.
 """
 from __future__ import annotations
 
+import copy
 import warnings
 
 import numpy as np
@@ -17,7 +18,7 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
-from analysis.surrogate.network import MetricsRegressor, make_surrogate
+from analysis.surrogate.network import MetricsRegressor, _convergence_messages, make_surrogate
 
 #: Candidate names and what they are (for tables and the report).
 CANDIDATES = {
@@ -176,6 +177,32 @@ class MLPEnsemble(MetricsRegressor):
         if not return_std:
             return mean
         return mean, P.std(axis=0, ddof=1) if len(P) > 1 else np.zeros_like(mean)
+
+
+def refit_warm(ensemble, X, y):
+    """A copy of a fitted :class:`MLPEnsemble` refitted on (X, y), each member from its own weights.
+
+    Each member's scalers are refitted on the new runs and its kept network is trained on
+    from its fitted weights (``warm_start``; one start instead of ``n_init`` restarts): about
+    5x cheaper than a fresh fit when the runs differ little (a leave-one-point-out fit
+    started from a k-fold model). Start from a model that has not seen the runs to be held
+    out, or their held-out score is optimistic.
+    """
+    model = copy.deepcopy(ensemble)
+    X, Y = model._validate_fit(X, y)
+    for member in model.members_:
+        Xs = member["scale_inputs"].fit_transform(X)
+        target = member[-1]
+        ys = target.transformer_.fit_transform(model._shaped(Y).reshape(len(Y), -1))
+        restarted = target.regressor_
+        net = restarted.best_.set_params(warm_start=True)
+        with _convergence_messages() as messages, threadpool_limits(1, user_api="blas"):
+            net.fit(Xs, ys if ys.shape[1] > 1 else ys[:, 0])
+        restarted.loss_, restarted.n_iter_, restarted.losses_ = net.loss_, net.n_iter_, [float(net.loss_)]
+        restarted.convergence_warnings_ = messages
+        for message in messages:
+            warnings.warn(message, ConvergenceWarning, stacklevel=2)
+    return model
 
 
 class TreeEnsemble(MetricsRegressor):

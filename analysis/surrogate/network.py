@@ -40,6 +40,7 @@ from contextlib import contextmanager
 
 import numpy as np
 import sklearn
+from joblib import Parallel, delayed
 from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.compose import TransformedTargetRegressor
 from sklearn.exceptions import ConvergenceWarning
@@ -50,7 +51,7 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 from threadpoolctl import threadpool_limits
 
-from analysis.metrics.dataset import input_columns, point_groups
+from analysis.metrics.dataset import METRICS, input_columns, point_groups
 from analysis.surrogate.data import _check_dataset, _names, inputs_of, point_folds, split_runs, targets_of
 from analysis.surrogate.scores import _MAPE_NOTE, R_TARGET, _score_text, regression_scores
 
@@ -315,3 +316,43 @@ def fit_surrogate(df, params):
         f"(alpha={params['alpha']} too strong, or training stopped early)"
         for m, s in scores["train"].items() if s["R"] is None or s["R"] < R_TARGET]
     return model, scores
+
+
+def _split_test_scores(df, params, seed):
+    """Test scores of the network fitted on the seeded paper-style split ``seed``."""
+    X, Y = inputs_of(df), targets_of(df)
+    train, test = split_runs(df, params["n_test"], seed)
+    with _convergence_messages():
+        model = make_surrogate(params).fit(X[train], Y[train])
+    return regression_scores(Y[test], model.predict(X[test]))
+
+
+def test_r_spread(df, params, n_splits=20, n_jobs=1):
+    """The paper's network's test R over ``n_splits`` seeded paper-style splits: how much one split moves it.
+
+    Split k holds out ``n_test`` points chosen with seed ``split_seed + k`` (split 0 is the
+    split of :func:`fit_surrogate`); the network is refitted on each split's training points.
+
+    Returns
+    -------
+    dict
+        JSON-ready: ``n_splits``, ``seeds``, ``n_test``, and per metric ``R_mean``, ``R_sd``
+        (ddof 1), ``R_min``, ``R_max`` and ``R`` (every split's, in seed order).
+    """
+    _check_dataset(df)
+    seeds = [int(params["split_seed"]) + k for k in range(int(n_splits))]
+    scores = Parallel(n_jobs=n_jobs)(delayed(_split_test_scores)(df, params, s) for s in seeds)
+    out = {"n_splits": len(seeds), "seeds": seeds, "n_test": int(params["n_test"]),
+           "by": "(U, omega) point, as the paper's 35/10 split"}
+    for m in scores[0]:
+        r = np.array([np.nan if s[m]["R"] is None else s[m]["R"] for s in scores], float)
+        out[m] = {"R_mean": float(np.nanmean(r)), "R_sd": float(np.nanstd(r, ddof=1)) if len(r) > 1 else 0.0,
+                  "R_min": float(np.nanmin(r)), "R_max": float(np.nanmax(r)), "R": r.tolist()}
+    return out
+
+
+def format_spread(spread):
+    """One line: the mean test R +- its sd (min-max) per metric over the splits."""
+    return (f"paper's network, test R over {spread['n_splits']} seeded {spread['n_test']}-point test splits: "
+            + "; ".join(f"{METRICS[m][0]} {spread[m]['R_mean']:.3f} +- {spread[m]['R_sd']:.3f} "
+                        f"({spread[m]['R_min']:.3f} to {spread[m]['R_max']:.3f})" for m in METRICS))

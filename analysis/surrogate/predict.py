@@ -31,7 +31,10 @@ def hybrid_indices(frame, maxima=None):
     Returns
     -------
     throughput_index, defect_index : numpy.ndarray (dimensionless)
-        ``Q_s/max(Q_s) * M_s/max(M_s)`` and ``R_q/max(R_q) * Phi/max(Phi)``.
+        ``Q_s/max(Q_s) * M_s/max(M_s)`` and ``R_q/max(R_q) * Phi+/max(Phi)``, with
+        ``Phi+ = max(Phi, 0)``: eq. 7's porosity goes negative where a deposit is deeper
+        than 4 R_q (and a model of it may), a layer's void fraction cannot; so the
+        defect index is never negative.
     """
     maxima = metric_maxima(frame) if maxima is None else maxima
     bad = [m for m in METRICS if not maxima[m] > 0]
@@ -39,7 +42,7 @@ def hybrid_indices(frame, maxima=None):
         raise ValueError(f"cannot normalise by a non-positive maximum: {', '.join(bad)}")
     norm = {m: frame[m].to_numpy(float) / maxima[m] for m in METRICS}
     return (norm["throughput_mm2_s"] * norm["mass_g"],
-            norm["roughness_um"] * norm["porosity_pct"])
+            norm["roughness_um"] * np.clip(norm["porosity_pct"], 0.0, None))
 
 
 def provides_std(model):
@@ -199,9 +202,11 @@ def index_intervals(frame, maxima):
     An index is its product (``throughput_product`` = Q_s M_s, ``defect_product`` =
     R_q Phi) over the product of the maxima, so its interval is the product's over the
     same constant: ``throughput_index_lo``, ``_hi``, ``_mean_lo``, ``_mean_hi``, and the
-    same for ``defect_index`` (dimensionless).
+    same for ``defect_index`` (dimensionless), whose ends are clipped at 0 as its
+    porosity is (:func:`hybrid_indices`; R_q > 0, so the clip maps the interval's ends).
     """
     for index, (product, (a, b)) in zip(("throughput_index", "defect_index"), PRODUCTS.items()):
         for end in ("lo", "hi", "mean_lo", "mean_hi"):
-            frame[f"{index}_{end}"] = frame[f"{product}_{end}"] / (maxima[a] * maxima[b])
+            value = frame[f"{product}_{end}"] / (maxima[a] * maxima[b])
+            frame[f"{index}_{end}"] = value.clip(lower=0.0) if index == "defect_index" else value
     return frame

@@ -161,14 +161,7 @@ def recommend(model, meta, max_porosity_pct, max_roughness_um=None, n=201, confi
         for end in ("lo", "hi"):
             if f"{m}_{end}" not in grid:
                 grid[f"{m}_{end}"] = np.nan
-    limits = {"porosity_pct": max_porosity_pct, "roughness_um": max_roughness_um}
-    on_mean = np.ones(len(grid), bool)
-    on_interval = np.ones(len(grid), bool)
-    for m, limit in limits.items():
-        if limit is not None:
-            on_mean &= (grid[m] <= limit).to_numpy()
-            upper = grid[f"{m}_hi"].to_numpy(float) if with_intervals else grid[m].to_numpy(float)
-            on_interval &= upper <= limit
+    on_mean, on_interval = meets_limits(grid, max_porosity_pct, max_roughness_um, with_intervals)
     if not on_mean.any():
         return None
     pool = on_interval if on_interval.any() else on_mean
@@ -178,6 +171,25 @@ def recommend(model, meta, max_porosity_pct, max_roughness_um=None, n=201, confi
             "confidence": confidence, "meets_confidence": bool(on_interval.any()),
             "n_feasible": int(on_interval.sum()), "n_feasible_mean": int(on_mean.sum()),
             "n_grid": len(grid), "inputs": names}
+
+
+def meets_limits(grid, max_porosity_pct, max_roughness_um=None, with_intervals=True):
+    """Which rows of a prediction frame meet the porosity (%) and roughness (um) limits (None: no limit).
+
+    Returns
+    -------
+    on_mean, on_interval : numpy.ndarray of bool
+        The predicted mean within every limit; the upper end of the single-run interval
+        (``<metric>_hi``) within every limit (the mean, when ``with_intervals`` is False).
+    """
+    on_mean = np.ones(len(grid), bool)
+    on_interval = np.ones(len(grid), bool)
+    for m, limit in {"porosity_pct": max_porosity_pct, "roughness_um": max_roughness_um}.items():
+        if limit is not None:
+            on_mean &= (grid[m] <= limit).to_numpy()
+            upper = grid[f"{m}_hi"].to_numpy(float) if with_intervals else grid[m].to_numpy(float)
+            on_interval &= upper <= limit
+    return on_mean, on_interval
 
 
 def _predict_search_grid(model, meta, n, fixed, axis_points, confidence=None):

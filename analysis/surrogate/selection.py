@@ -22,7 +22,16 @@ split), and the best is the one the maps, the grid and the recommendation use:
 
 Choice (:func:`choose_model`): the highest repeated-k-fold R^2 averaged over
 the four metrics (R^2, unlike the paper's R, also penalises an offset or a
-wrong scale); ties go to the model listed first in ``surrogate.models``.
+wrong scale) decides only when it is clear: every candidate within one
+standard error of the best score (:func:`fold_scores`) is tied with it, and a
+tie goes to the first listed smooth model (:data:`SMOOTH`: the paper's network,
+then the GP, in ``surrogate.models`` order); the trees, whose surfaces are
+piecewise flat, are chosen only when better by more than that margin.
+
+The leave-one-point-out fits of the network are warm-started
+(:func:`analysis.surrogate.candidates.refit_warm`) from the first k-fold
+repeat's fold model that held the same point out, so no fit starts from
+weights that saw its held-out point; they only report, the choice is the k-fold's.
 
 Every model takes X = (U [mm/s], omega [rad/s]) of shape (n, 2) and returns
 the four metrics of :data:`analysis.surrogate.data.METRICS` in their units;
@@ -39,10 +48,11 @@ from scipy.stats import norm
 
 from analysis.io import atomic_path
 from analysis.metrics.dataset import METRICS, input_columns, point_groups
-from analysis.surrogate.candidates import CANDIDATES, GPSurrogate, make_candidate
+from analysis.surrogate.candidates import CANDIDATES, GPSurrogate, make_candidate, refit_warm
 from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, targets_of
 from analysis.surrogate.intervals import (
     calibrate,
+    calibrated_from_predictions,
     check_confidence,
     conformal_quantile,
     interval_score,
@@ -52,17 +62,41 @@ from analysis.surrogate.intervals import (
 from analysis.surrogate.network import _convergence_messages
 from analysis.surrogate.scores import _num, regression_scores
 
+#: Candidates whose surfaces are smooth, in the order a tie prefers them (config order decides among them).
+SMOOTH = ("mlp", "gp")
 
-def _fold(name, p, X, Y, train, test):
-    """Fit a fresh ``name`` candidate on one fold.
 
-    Returns (test rows, their predictions and std, ConvergenceWarnings, fit s).
+def _fold(name, p, X, Y, train, test, start=None, keep=False):
+    """Fit a ``name`` candidate on one fold: fresh, or warm-started from the fitted ``start``.
+
+    Returns (test rows, their predictions and std, ConvergenceWarnings, fit s, the model
+    when ``keep`` else None).
     """
     t0 = time.perf_counter()
     with _convergence_messages() as messages:
-        model = make_candidate(name, p).fit(X[train], Y[train])
+        if start is None:
+            model = make_candidate(name, p).fit(X[train], Y[train])
+        else:
+            model = refit_warm(start, X[train], Y[train])
     mean, std = model.predict(X[test], return_std=True)
-    return test, mean, std, len(messages), time.perf_counter() - t0
+    return test, mean, std, len(messages), time.perf_counter() - t0, model if keep else None
+
+
+def fold_scores(Y, pred, folds):
+    """Mean R^2 over the metrics of each fold's held-out runs, on the scale of all runs.
+
+    Pooled over the runs, the mean R^2 over the metrics is ``1 - mean_i l_i`` with
+    ``l_i = mean_m (y_im - yhat_im)^2 / var_m`` (``var_m`` over all runs), so a fold's
+    score ``1 - mean_{i in fold} l_i`` averages to the pooled score over equal folds and
+    stays finite on a fold whose own spread is small.
+
+    Returns
+    -------
+    numpy.ndarray, shape (len(folds),)
+    """
+    var = Y.var(axis=0)
+    loss = (((Y - pred) ** 2) / np.where(var > 0, var, 1.0)).mean(axis=1)
+    return np.array([1 - loss[test].mean() for _, test in folds])
 
 
 def interval_scores(Y, preds, stds, repeats, rho, confidence):
@@ -122,7 +156,7 @@ def interval_scores(Y, preds, stds, repeats, rho, confidence):
             "std_coverage_pct": 100 * raw.mean(axis=(0, 1))}
 
 
-def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=False):
+def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=False, warm_loo=True):
     """Score every candidate of ``params["models"]`` by grouped cross-validation.
 
     Schemes: ``kfold``: ``cv_folds``-fold over the (U, omega) points, repeated
@@ -146,6 +180,10 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
         Folds fitted at once (joblib processes); the scores do not depend on it.
     return_predictions : bool
         Also return the held-out predictions.
+    warm_loo : bool
+        Warm-start the network's leave-one-point-out fits from the first repeat's k-fold
+        models (:func:`analysis.surrogate.candidates.refit_warm`); False: fresh fits, as the
+        k-fold's (benchmarks/bench_model_choice.py compares the two).
 
     Returns
     -------
@@ -153,7 +191,10 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
         One row per (model, scheme, metric): ``model``, ``scheme``,
         ``metric``, ``symbol``, ``R``, ``R2``, ``MAPE_pct``, ``R_sd``,
         ``R2_sd``, ``MAPE_pct_sd``, the columns of :func:`interval_scores`,
-        ``n_splits`` (folds x repeats, or points),
+        ``mean_R2_se`` (the standard error of the model's mean R^2 over the metrics: the
+        standard deviation of its per-fold scores (:func:`fold_scores`) over every repeat and
+        fold, over the square root of the folds of one repeat, as the runs are split that
+        many ways; repeats reshuffle the same runs), ``n_splits`` (folds x repeats, or points),
         ``fit_s`` (the scheme's fits, summed over its folds), ``convergence_warnings``.
     predictions : pandas.DataFrame
         Only with ``return_predictions``: one row per (model, scheme, repeat, run):
@@ -172,21 +213,35 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
         schemes.append(("loo", [point_folds(df, n_points, 0)]))
     tasks = [(name, scheme, r, train, test) for name in p["models"] for scheme, repeats in schemes
              for r, splits in enumerate(repeats) for train, test in splits]
-    folds = Parallel(n_jobs=n_jobs)(delayed(_fold)(name, p, X, Y, train, test)
-                                    for name, _, _, train, test in tasks)
+    warm = [warm_loo and t[0] == "mlp" and t[1] == "loo" for t in tasks]     # started from the k-fold's models
+    keep = [warm_loo and t[0] == "mlp" and t[1] == "kfold" and t[2] == 0 for t in tasks]
+    fresh = Parallel(n_jobs=n_jobs)(delayed(_fold)(name, p, X, Y, train, test, keep=k)
+                                    for (name, _, _, train, test), w, k in zip(tasks, warm, keep) if not w)
+    fresh = iter(fresh)
+    folds = [None if w else next(fresh) for w in warm]
+    start = {}                      # point row -> the repeat-0 k-fold network that held it out
+    for fold in folds:
+        if fold is not None and fold[-1] is not None:
+            start.update(dict.fromkeys(fold[0].tolist(), fold[-1]))
+    later = Parallel(n_jobs=n_jobs)(delayed(_fold)(name, p, X, Y, train, test, start=start[int(test[0])])
+                                    for (name, _, _, train, test), w in zip(tasks, warm) if w)
+    later = iter(later)
+    folds = [next(later) if w else f for w, f in zip(warm, folds)]
     rows, held_out = [], []
     for name in p["models"]:
         for scheme, repeats in schemes:
             preds = {r: np.full_like(Y, np.nan) for r in range(len(repeats))}
             stds = {r: np.full_like(Y, np.nan) for r in range(len(repeats))}
             warned, elapsed = 0, 0.0
-            for (n, sc, r, _, _), (test, fold_pred, fold_std, n_warn, fit_s) in zip(tasks, folds):
+            for (n, sc, r, _, _), (test, fold_pred, fold_std, n_warn, fit_s, _) in zip(tasks, folds):
                 if (n, sc) == (name, scheme):
                     preds[r][test] = fold_pred
                     stds[r][test] = fold_std
                     warned += n_warn
                     elapsed += fit_s
             scores = [regression_scores(Y, pred) for pred in preds.values()]
+            per_fold = np.concatenate([fold_scores(Y, preds[r], splits) for r, splits in enumerate(repeats)])
+            se = float(per_fold.std(ddof=1) / np.sqrt(len(repeats[0]))) if len(per_fold) > 1 else 0.0
             covered = interval_scores(Y, list(preds.values()), list(stds.values()), repeats, rho, confidence)
             for j, (m, (symbol, _)) in enumerate(METRICS.items()):
                 values = {k: np.array([np.nan if s[m][k] is None else s[m][k] for s in scores])
@@ -195,7 +250,7 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
                              **{k: float(np.mean(v)) for k, v in values.items()},
                              **{f"{k}_sd": float(np.std(v)) for k, v in values.items()},
                              **{k: float(v[j]) for k, v in covered.items()},
-                             "n_splits": sum(len(s) for s in repeats),
+                             "mean_R2_se": se, "n_splits": sum(len(s) for s in repeats),
                              "fit_s": round(elapsed, 2), "convergence_warnings": warned})
             for r in preds:
                 frame = pd.DataFrame(np.c_[preds[r], stds[r]],
@@ -234,16 +289,48 @@ def under_covering(table, min_coverage):
     return {m: block["symbol"].tolist() for m, block in low.groupby("model", sort=False)}
 
 
+def decide(table, order=None, min_coverage=None):
+    """The choice of :func:`choose_model` with its reasons.
+
+    Returns
+    -------
+    dict
+        ``chosen``; ``best`` (highest mean k-fold R^2 among the eligible); ``margin`` (its
+        standard error, ``mean_R2_se``; 0 for a table without it); ``tied`` (the eligible
+        within the margin of the best, config order); ``ranking`` (mean k-fold R^2 per model,
+        best first); ``se`` (per model); ``under_covering`` (:func:`under_covering`).
+    """
+    kfold = table[table["scheme"] == "kfold"]
+    mean_r2 = kfold.groupby("model", sort=False)["R2"].mean()
+    se = (kfold.groupby("model", sort=False)["mean_R2_se"].first() if "mean_R2_se" in kfold
+          else pd.Series(0.0, index=mean_r2.index)).fillna(0.0)
+    order = list(order or mean_r2.index)
+    rank = pd.Series({m: mean_r2[m] for m in order if m in mean_r2.index}).fillna(-np.inf)
+    low = under_covering(table, min_coverage)
+    eligible = [m for m in rank.index if m not in low] or list(rank.index)
+    best = max(eligible, key=lambda m: (rank[m], -order.index(m)))
+    margin = float(se.get(best, 0.0))
+    tied = [m for m in eligible if rank[best] - rank[m] <= margin]
+    smooth = [m for m in tied if m in SMOOTH]
+    return {"chosen": smooth[0] if smooth else best, "best": best, "margin": margin, "tied": tied,
+            "ranking": rank.sort_values(ascending=False, kind="stable"), "se": se, "under_covering": low}
+
+
 def choose_model(table, order=None, min_coverage=None):
-    """The candidate with the highest mean k-fold R^2 over the metrics among those whose
-    intervals do not under-cover; ties: first in ``order``.
+    """The candidate chosen by the k-fold scores, robust to their noise.
+
+    Among the candidates whose intervals do not under-cover, the one with the highest mean
+    k-fold R^2 over the metrics is the best; every candidate whose score is within the
+    best's standard error (``mean_R2_se``) is tied with it, and a tie goes to the first
+    smooth model (:data:`SMOOTH`) in ``order``; the best is chosen when no smooth model is
+    tied with it.
 
     Parameters
     ----------
     table : pandas.DataFrame
         :func:`cross_validate_models`' table.
     order : list of str, optional
-        Candidates in config order (ties go to the first).
+        Candidates in config order (ties go to the first smooth one, then to the first).
     min_coverage : float, optional
         Least k-fold coverage (%) of the calibrated intervals, for every metric
         (:func:`min_coverage_pct`); a candidate below it is passed over unless all are.
@@ -255,15 +342,25 @@ def choose_model(table, order=None, min_coverage=None):
     ranking : pandas.Series
         Mean k-fold R^2 per model, best first.
     """
-    kfold = table[table["scheme"] == "kfold"]
-    mean_r2 = kfold.groupby("model", sort=False)["R2"].mean()
-    order = list(order or mean_r2.index)
-    rank = pd.Series({m: mean_r2[m] for m in order if m in mean_r2.index})
-    rank = rank.fillna(-np.inf)
-    low = under_covering(table, min_coverage)
-    eligible = [m for m in rank.index if m not in low] or list(rank.index)
-    best = max(eligible, key=lambda m: (rank[m], -order.index(m)))
-    return best, rank.sort_values(ascending=False, kind="stable")
+    d = decide(table, order, min_coverage)
+    return d["chosen"], d["ranking"]
+
+
+def choice_rule_text(d):
+    """One sentence: the best score, its standard error, the tie and the chosen model (:func:`decide`)."""
+    best, chosen, margin = d["best"], d["chosen"], d["margin"]
+    text = (f"best mean k-fold R^2: {best} {d['ranking'][best]:.4f} +- {margin:.4f} (its standard error: "
+            "the spread of its per-fold scores over every repeat and fold, over sqrt(folds)); ")
+    others = [m for m in d["tied"] if m != best]
+    if others:
+        text += ("within that margin, tied with it: " + ", ".join(f"{m} {d['ranking'][m]:.4f}" for m in others)
+                 + "; ")
+    if chosen != best:
+        return text + (f"the tie goes to the first listed smooth model, **{chosen}** "
+                       f"({d['ranking'][best] - d['ranking'][chosen]:.4f} below the best, less than the margin)")
+    if best not in SMOOTH:
+        return text + f"no smooth model within the margin: **{best}** is clearly better and is chosen"
+    return text + f"**{best}** is chosen"
 
 
 def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=None, min_coverage=None):
@@ -276,7 +373,7 @@ def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=No
     symbols = [s for s, _ in METRICS.values()]
     title = "# Surrogate model choice by cross-validation" + (f" ({level})" if level else "")
     head = ["model", "scheme", f"R: {' / '.join(symbols)}", f"R^2: {' / '.join(symbols)}",
-            f"MAPE %: {' / '.join(symbols)}", "mean R^2", "fits", "s"]
+            f"MAPE %: {' / '.join(symbols)}", "mean R^2 +- se", "fits", "s"]
     low = under_covering(table, min_coverage)
     rule = "the highest repeated k-fold R^2 averaged over the four metrics"
     if min_coverage is not None:
@@ -284,9 +381,14 @@ def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=No
                  f"{min_coverage:g} % of the held-out runs of every metric (k-fold)")
         if chosen in low:
             rule += "; **every candidate under-covers**, so the best R^2 is taken regardless"
+    rule += ("; a candidate within one standard error of the best score is tied with it, and a tie goes to the "
+             "first listed smooth model (mlp, then gp, in config order): the trees only when clearly better")
     lines = [title, "",
              f"Chosen: **{chosen}** ({CANDIDATES.get(chosen, chosen)}): {rule}. Folds are points "
              "(U, omega and any swept axis): the replicates of a point are left out together.", ""]
+    if "mean_R2_se" in table:
+        d = decide(table, list(dict.fromkeys(table["model"])), min_coverage)
+        lines += [f"Margin: {choice_rule_text(d)}.", ""]
 
     def joined(values, f):
         return " / ".join("n/a" if not np.isfinite(v) else format(v, f) for v in values)
@@ -298,7 +400,9 @@ def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=No
     for (model, scheme), block in table.groupby(["model", "scheme"], sort=False):
         block = block.set_index("metric").loc[list(METRICS)]
         rows.append([bold(model), scheme, joined(block["R"], ".3f"),
-                     joined(block["R2"], ".3f"), joined(block["MAPE_pct"], ".1f"), f"{block['R2'].mean():.3f}",
+                     joined(block["R2"], ".3f"), joined(block["MAPE_pct"], ".1f"),
+                     f"{block['R2'].mean():.4f}" + (f" +- {block['mean_R2_se'].iloc[0]:.4f}"
+                                                    if "mean_R2_se" in block else ""),
                      str(int(block["n_splits"].iloc[0])), f"{block['fit_s'].iloc[0]:.1f}"])
         if "coverage_pct" in block:
             flag = ("under-covers " + ", ".join(low[model])) if scheme == "kfold" and model in low else ""
@@ -390,6 +494,31 @@ def fit_chosen(df, params, name, train_idx=None):
                                 for m, ls in zip(METRICS, model.length_scales_)}
         info["noise_std"] = {m: float(s) for m, s in zip(METRICS, model.noise_std_)}
     return model, info
+
+
+def fit_calibrated(df, params, name, train_idx, predictions):
+    """Candidate ``name`` fitted on the runs ``train_idx`` (:func:`fit_chosen`), its intervals calibrated
+    on its k-fold held-out predictions (``predictions``: cv_predictions.csv, every candidate's).
+
+    Returns (the :class:`analysis.surrogate.intervals.CalibratedSurrogate`, :func:`fit_chosen`'s info,
+    the noise's source as text).
+    """
+    model, info = fit_chosen(df, params, name, train_idx)
+    held_out = predictions[(predictions["model"] == name) & (predictions["scheme"] == "kfold")]
+    rho, source = relative_noise(df, random_state=int(params["random_state"]))
+    return calibrated_from_predictions(model, held_out, df, rho, params["confidence"], source), info, source
+
+
+def smooth_stand_in(df, params, name, train_idx, predictions):
+    """For the process map's iso-lines: None when ``name`` is a smooth model (:data:`SMOOTH`), else the
+    first smooth candidate of ``params["models"]`` (the GP if none is listed), fitted and calibrated as
+    the chosen model is (:func:`fit_calibrated`), and its name."""
+    if name in SMOOTH:
+        return None, None
+    smooth = next((m for m in params["models"] if m in SMOOTH), "gp")
+    if smooth not in set(predictions["model"]):
+        return None, None
+    return fit_calibrated(df, params, smooth, train_idx, predictions)[0], smooth
 
 
 def chosen_summary(model, info, df, split, table):

@@ -29,6 +29,9 @@ import numpy as np
 import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+from matplotlib.ticker import MaxNLocator
 
 from analysis.config import variant_path
 from analysis.io import atomic_path
@@ -158,6 +161,13 @@ def _panels(view, df, split):
     return [(view or MapView(inputs=tuple(input_columns(df))), df, split)]
 
 
+def _panel_grids(model, df, split, view, panels, n, metric):
+    """The panels (:func:`_panels` unless given), each one's n x n grid, and ``metric``'s range over all."""
+    panels = panels or _panels(view, df, split)
+    grids = [v.grid(model, *v.ranges(pts), n) for v, pts, _ in panels]
+    return panels, grids, (min(g[metric].min() for g in grids), max(g[metric].max() for g in grids))
+
+
 def _grid_fig(k, kind, **kwargs):
     """A figure of ``k`` panels side by side (3-D axes for ``kind`` '3d'); returns (fig, axes)."""
     width, height = kwargs.pop("size")
@@ -190,9 +200,7 @@ def surface_figure(model, df, split, metric, n=41, view=None, panels=None):
     -------
     matplotlib.figure.Figure
     """
-    panels = panels or _panels(view, df, split)
-    grids = [v.grid(model, *v.ranges(pts), n) for v, pts, _ in panels]
-    lo, hi = min(g[metric].min() for g in grids), max(g[metric].max() for g in grids)
+    panels, grids, (lo, hi) = _panel_grids(model, df, split, view, panels, n, metric)
     fig, axes = _grid_fig(len(panels), "3d", size=(8.0, 6.5))
     for ax, (v, pts, part), grid in zip(axes, panels, grids):
         (ya, xa), shape = v.axes, (n, n)
@@ -285,6 +293,138 @@ def interval_figure(model, df, split, metric, n=41, view=None, panels=None):
                  label=f"half-width of the {level} interval of {LABELS[metric]}")
     _caption(fig, f"{level} of new DEM runs fall within the prediction +- this (calibrated by grouped "
              "cross-conformal prediction on held-out runs; run-to-run noise included)")
+    return fig
+
+
+def _run_points(ax, pts, part, axes):
+    """The simulated runs on a 2-D map: training (blue circles), test (black squares), supply-limited (red rings)."""
+    ya, xa = axes
+    x, y = (pts[c].to_numpy(float) for c in (xa, ya))
+    for rows, colour, marker, label in ((part[0], _TRAIN, "o", "training runs"), (part[1], _TEST, "s", "test runs")):
+        ax.scatter(x[rows], y[rows], color=colour, edgecolor="white", marker=marker, s=30, zorder=4,
+                   clip_on=False, label=f"simulated {label} ({len(rows)})")
+    limited = supply_limited(pts)
+    if limited.any():
+        ax.scatter(x[limited], y[limited], facecolor="none", edgecolor="tab:red", s=90, linewidth=1.5, zorder=5,
+                   clip_on=False, label=f"supply-limited: a lower bound ({limited.sum()})")
+
+
+def contour_figure(model, df, split, metric, n=61, view=None, panels=None):
+    """A metric over the two inputs as a 2-D contour map (omega across, U up), the simulated runs on it.
+
+    Beside each 3-D surface, the map on which an operator reads the predicted value at a
+    setting: filled contours with labelled contour lines of the model's mean, the
+    training and test runs as points. Arguments as :func:`surface_figure`'s.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    panels, grids, (lo, hi) = _panel_grids(model, df, split, view, panels, n, metric)
+    levels = MaxNLocator(12).tick_values(lo, hi)
+    fig, axes = _grid_fig(len(panels), "2d", size=(7.5, 6.2), layout="constrained")
+    for ax, (v, pts, part), grid in zip(axes, panels, grids):
+        Y, X, Z = (grid[c].to_numpy().reshape(n, n) for c in (*v.axes, metric))
+        filled = ax.contourf(X, Y, Z, levels=levels, cmap="viridis")
+        lines = ax.contour(X, Y, Z, levels=levels[1:-1:2], colors="white", linewidths=0.7)
+        ax.clabel(lines, fontsize=8, fmt="%.3g")
+        _run_points(ax, pts, part, v.axes)
+        ax.set(xlabel=axis_label(v.axes[1]), ylabel=axis_label(v.axes[0]),
+               title=f"{TITLES[metric]} {LABELS[metric]}" + (f"\n{v.title()}" if v.title() else ""))
+        ax.legend(loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=3, fontsize=8, frameon=False)
+    fig.colorbar(filled, ax=axes if len(axes) > 1 else axes[0], label=f"predicted {LABELS[metric]}")
+    return fig
+
+
+def window_figure(model, df, split, max_porosity_pct=None, max_roughness_um=None, n=121, view=None, panels=None):
+    """The operating window: the settings whose single runs meet the operator's limits, the best marked.
+
+    A setting is in the window when the upper end of its calibrated single-run interval (at
+    the model's confidence) meets every limit, the rule of :mod:`analysis.surrogate.recommend`;
+    a model without finite intervals is judged on its mean, and the title says so. Over the
+    window: contours of the predicted throughput Q_s, each limit's boundary, and the
+    recommended setting (the highest Q_s in the window) starred with its values.
+
+    Parameters
+    ----------
+    model : estimator
+        Fitted surrogate, preferably with calibrated intervals.
+    df, split, view, panels
+        As :func:`surface_figure`'s.
+    max_porosity_pct, max_roughness_um : float, optional
+        The limits (%, um); None: no limit.
+    n : int
+        Grid points per axis.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        With ``fig.recommended``: per panel the recommended setting (a dict of the inputs and
+        the predicted metrics) or None when no setting meets the limits.
+    """
+    from analysis.surrogate.recommend import meets_limits
+
+    panels = panels or _panels(view, df, split)
+    with_intervals = provides_intervals(model) and model.is_finite()
+    rule = (f"the upper end of the {_level(model)} single-run interval meets every limit" if with_intervals
+            else "the predicted mean meets every limit (no finite interval: " + (
+                _too_few(model) if provides_intervals(model) else "the model has no calibrated intervals") + ")")
+    limits = ([] if max_porosity_pct is None else [f"$\\Phi$ ≤ {max_porosity_pct:g} %"]) + \
+        ([] if max_roughness_um is None else [f"$R_q$ ≤ {max_roughness_um:g} $\\mu$m"])
+    fig, axes = _grid_fig(len(panels), "2d", size=(7.8, 6.6), layout="constrained")
+    grids = [v.grid(model, *v.ranges(pts), n) for v, pts, _ in panels]
+    q_levels = MaxNLocator(10).tick_values(min(g["throughput_mm2_s"].min() for g in grids),
+                                                              max(g["throughput_mm2_s"].max() for g in grids))
+    fig.recommended = []
+    for ax, (v, pts, part), grid in zip(axes, panels, grids):
+        on_mean, on_interval = meets_limits(grid, max_porosity_pct, max_roughness_um, with_intervals)
+        (ya, xa), shape, units = v.axes, (n, n), input_units(v.axes)
+        Y, X = (grid[c].to_numpy().reshape(shape) for c in v.axes)
+        inside = on_interval.reshape(shape).astype(float)
+        ax.contourf(X, Y, inside, levels=[-0.5, 0.5, 1.5], colors=["0.82", "#b7e4a7"])
+        q = ax.contour(X, Y, grid["throughput_mm2_s"].to_numpy().reshape(shape), levels=q_levels,
+                       colors="0.35", linewidths=0.7)
+        ax.clabel(q, fontsize=8, fmt="%.3g")
+        for metric, limit, style in (("porosity_pct", max_porosity_pct, "--"), ("roughness_um", max_roughness_um, ":")):
+            if limit is None:
+                continue
+            column = f"{metric}_hi" if with_intervals else metric
+            edge = grid[column].to_numpy().reshape(shape)
+            if edge.min() < limit < edge.max():
+                ax.contour(X, Y, edge, levels=[limit], colors="k", linestyles=style, linewidths=1.4)
+        handles = [Patch(color="#b7e4a7", label="operating window: " + " and ".join(limits)),
+                   Patch(color="0.82", label="outside: a run there may exceed a limit" if with_intervals
+                         else "outside: the predicted mean exceeds a limit"),
+                   Line2D([], [], color="0.35", lw=0.7, label="predicted $Q_s$ (mm$^2$/s)")]
+        handles += [Line2D([], [], color="k", ls=style, label=f"{name} limit")
+                    for name, limit, style in (("porosity", max_porosity_pct, "--"),
+                                               ("roughness", max_roughness_um, ":")) if limit is not None]
+        best = None
+        if on_interval.any():
+            row = grid.loc[grid["throughput_mm2_s"].where(pd.Series(on_interval, index=grid.index)).idxmax()]
+            best = {c: float(row[c]) for c in (*v.axes, *METRICS)}
+            ax.scatter([best[xa]], [best[ya]], marker="*", s=260, color="gold", edgecolor="k", zorder=6, clip_on=False)
+            handles.append(Line2D(
+                [], [], marker="*", ms=14, color="gold", mec="k", ls="none",
+                label=(f"recommended: {SYMBOLS.get(ya, ya)} = {best[ya]:.3g} {units[ya]}, "
+                       f"{SYMBOLS.get(xa, xa)} = {best[xa]:.3g} {units[xa]}; "
+                       f"$Q_s$ = {best['throughput_mm2_s']:.3g} mm$^2$/s, $\\Phi$ = {best['porosity_pct']:.3g} %, "
+                       f"$R_q$ = {best['roughness_um']:.3g} $\\mu$m")))
+        else:
+            ax.text(0.5, 0.5, "no setting meets the limits\n" + ("at this confidence" if with_intervals else ""),
+                    transform=ax.transAxes, ha="center", va="center", fontsize=12,
+                    bbox={"facecolor": "white", "edgecolor": "0.5"})
+        fig.recommended.append(best)
+        _run_points(ax, pts, part, v.axes)
+        run_handles, _ = ax.get_legend_handles_labels()
+        ax.legend(handles=handles + run_handles, loc="upper left", bbox_to_anchor=(0.0, -0.1), fontsize=8,
+                  frameon=False)
+        ax.set(xlabel=axis_label(xa), ylabel=axis_label(ya))
+        ax.set_title(f"Operating window: {' and '.join(limits) or 'no limits'}"
+                     + (f" in {_level(model)} of runs" if with_intervals else " on the mean")
+                     + (f"\n{v.title()}" if v.title() else ""), pad=14)     # clear of a star on the top edge
+    _caption(fig, f"In the window, {rule}: analysis.surrogate.recommend's rule ("
+             "spreadmap-recommend prints the same setting from a finer grid). Limits: config maps.operating_window.")
     return fig
 
 
@@ -397,12 +537,16 @@ def iso_values(df, n_U=5, n_omega=9, axes=tuple(INPUTS)):
 _DECIMALS = {"U_mm_s": 1, "omega_rad_s": 2}
 
 
-def process_map_figure(model, df, split, n=101, view=None, panels=None):
+def process_map_figure(model, df, split, n=101, view=None, panels=None, note=None):
     """The spreading process map of the paper's Figure 10.
 
     The metric maxima are those of the surrogate on an n x n grid over the swept range (of
     every panel together, so that panels share one scale); the iso-lines and the simulated
-    runs are normalised by them.
+    runs are normalised by them. Both indices start at 0 (the defect index is built from
+    ``max(Phi, 0)``, :func:`analysis.surrogate.predict.hybrid_indices`); the single-run
+    intervals are drawn at the simulated settings only, light and under the lines; every
+    iso-line is labelled where its label overlaps no other label, no line and no run
+    (:func:`place_labels`; a line with no such place keeps its colour's legend entry only).
 
     Parameters
     ----------
@@ -417,10 +561,13 @@ def process_map_figure(model, df, split, n=101, view=None, panels=None):
         Grid points per axis and points per line.
     view, panels
         As :func:`surface_figure`'s.
+    note : str, optional
+        A sentence for the caption (e.g. which model draws the lines).
 
     Returns
     -------
     matplotlib.figure.Figure
+        Its iso-line labels are listed in ``fig.line_labels`` (matplotlib Text artists).
     """
     panels = panels or _panels(view, df, split)
     iso = [iso_values(pts, axes=v.axes) for v, pts, _ in panels]
@@ -428,67 +575,161 @@ def process_map_figure(model, df, split, n=101, view=None, panels=None):
                        for (v, _, _), (a, b) in zip(panels, iso)])
     maxima = metric_maxima(grids)
     with_intervals = provides_intervals(model) and model.is_finite()
-    fig, axes = _grid_fig(len(panels), "2d", size=(8.0, 6.5), layout="constrained")
-    for ax, (v, pts, part), (a_values, b_values) in zip(axes, panels, iso):
-        _draw_process_map(ax, model, v, pts, part, a_values, b_values, maxima, n, with_intervals)
-    if len(axes) > 1:      # panels on one scale: the same limits
-        for get, set_ in (("get_xlim", "set_xlim"), ("get_ylim", "set_ylim")):
-            limits = np.array([getattr(ax, get)() for ax in axes])
-            for ax in axes:
-                getattr(ax, set_)(limits[:, 0].min(), limits[:, 1].max())
+    fig, axes = _grid_fig(len(panels), "2d", size=(9.0, 6.5), layout="constrained")
+    drawn = [_draw_process_map(ax, model, v, pts, part, a_values, b_values, maxima, n, with_intervals)
+             for ax, (v, pts, part), (a_values, b_values) in zip(axes, panels, iso)]
+    right, upper = (max(getattr(ax, get)()[1] for ax in axes) for get in ("get_xlim", "get_ylim"))
+    for ax in axes:        # indices that cannot be negative start at 0; panels on one scale
+        ax.set_xlim(0, right)
+        ax.set_ylim(0, upper)
+    axes[-1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0)
+    caption = [note] if note else []
     if with_intervals:
-        _caption(fig, f"Crosses: the {_level(model)} interval of the indices of a single new run "
-                 "(calibrated by grouped cross-conformal prediction on held-out runs; run-to-run noise included)")
+        caption.append(f"Grey crosses: the {_level(model)} interval of the indices of a single new run at each "
+                       "simulated setting (calibrated by grouped cross-conformal prediction on held-out runs; "
+                       "run-to-run noise included)")
     elif provides_intervals(model):
-        _caption(fig, f"No interval crosses: {_too_few(model)}")
+        caption.append(f"No interval crosses: {_too_few(model)}")
+    if caption:
+        _caption(fig, ". ".join(caption))
+    fig.canvas.draw()                  # the layout settles; then it is frozen, so labels placed stay put
+    fig.set_layout_engine("none")
+    fig.line_labels = [text for ax, (lines, runs) in zip(axes, drawn) for text in place_labels(ax, lines, runs)]
     return fig
 
 
 def _draw_process_map(ax, model, view, df, split, a_values, b_values, maxima, n, with_intervals):
-    """One process map into ``ax``: iso-lines of the view's two inputs, the runs, the intervals."""
+    """One process map into ``ax``: iso-lines of the view's two inputs, the runs, their intervals.
+
+    Returns (the lines to label: (text, (k, 2) data points, colour), the runs' (m, 2) indices).
+    """
     lines = process_map_lines(model, a_values, b_values, maxima, n, view)
     runs_t, runs_d = hybrid_indices(df, maxima)
-    if with_intervals:
-        index_intervals(lines, maxima)
     (ya, xa), units = view.axes, input_units(view.axes)
-    label = {c: f"{SYMBOLS.get(c, c)} = {{:g}} {units[c]}".rstrip() for c in view.axes}
-    legend = {c: f"iso-{SYMBOLS.get(c, c)} lines" for c in view.axes}
-    # colour, label, where it goes (above the line's end with the least of the other input /
-    # right of the end with the greatest first input), legend entry
+    label = {c: f"{SYMBOLS.get(c, c)}={{:g}}" for c in view.axes}
+    legend = {c: f"iso-{SYMBOLS.get(c, c)} lines ({SYMBOLS.get(c, c)} in {units[c]})" if units[c]
+              else f"iso-{SYMBOLS.get(c, c)} lines" for c in view.axes}
     first, second = lines["family"].iloc[0], lines["family"].iloc[-1]
-    styles = {first: ("tab:blue", label[ya], xa, -1, dict(xytext=(0, 6), ha="center", va="bottom"), legend[ya]),
-              second: ("tab:red", label[xa], ya, 1, dict(xytext=(6, 0), ha="left", va="center"), legend[xa])}
-    labelled = set()
+    styles = {first: ("tab:blue", label[ya], legend[ya]), second: ("tab:red", label[xa], legend[xa])}
+    labelled, to_label = set(), []
     for (family, value), line in lines.groupby(["family", "value"], sort=False):
-        colour, fmt, along, sign, place, entry = styles[family]
-        ax.plot(line["throughput_index"], line["defect_index"], color=colour, lw=1.2,
+        colour, fmt, entry = styles[family]
+        ax.plot(line["throughput_index"], line["defect_index"], color=colour, lw=1.4, zorder=2,
                 label=None if family in labelled else entry)
         labelled.add(family)
-        if with_intervals:     # single-run interval crosses at every 10th point of the line
-            every = line.iloc[::10]
-            t, d = every["throughput_index"], every["defect_index"]
-            ax.errorbar(t, d, xerr=[t - every["throughput_index_lo"], every["throughput_index_hi"] - t],
-                        yerr=[d - every["defect_index_lo"], every["defect_index_hi"] - d],
-                        fmt="none", ecolor=colour, alpha=0.35, lw=1,
-                        label=None if "interval" in labelled else f"{_level(model)} single-run interval")
-            labelled.add("interval")
-        end = line.loc[(sign * line[along]).idxmax()]
-        ax.annotate(fmt.format(value), (end["throughput_index"], end["defect_index"]),
-                    textcoords="offset points", color=colour, fontsize=8, **place)
-    ax.scatter(runs_t[split[0]], runs_d[split[0]], facecolor="white", edgecolor="k", s=28,
+        to_label.append((fmt.format(value), line[["throughput_index", "defect_index"]].to_numpy(float), colour))
+    if with_intervals and len(df):     # at the simulated settings only, under the lines
+        at = view.frame(model, df[ya].to_numpy(float), df[xa].to_numpy(float))
+        t, d = hybrid_indices(at, maxima)
+        index_intervals(at, maxima)
+        ax.errorbar(t, d, xerr=[t - at["throughput_index_lo"], at["throughput_index_hi"] - t],
+                    yerr=[d - at["defect_index_lo"], at["defect_index_hi"] - d], fmt="none",
+                    ecolor="0.6", alpha=0.45, lw=0.8, zorder=1, label=f"{_level(model)} single-run interval")
+    ax.scatter(runs_t[split[0]], runs_d[split[0]], facecolor="white", edgecolor="k", s=22,
                zorder=3, label="simulated runs (training)")
-    ax.scatter(runs_t[split[1]], runs_d[split[1]], color="k", s=28, zorder=3,
+    ax.scatter(runs_t[split[1]], runs_d[split[1]], color="k", s=22, zorder=3,
                label="simulated runs (test)")
     limited = supply_limited(df)
     if limited.any():
         ax.scatter(np.asarray(runs_t)[limited], np.asarray(runs_d)[limited], facecolor="none", edgecolor="tab:red",
                    s=80, linewidth=1.5, zorder=4, label="supply-limited run (heap ran dry)")
     ax.set_xlabel(r"throughput index  $Q_s/\max(Q_s)\cdot M_s/\max(M_s)$")
-    ax.set_ylabel(r"defect index  $R_q/\max(R_q)\cdot \Phi/\max(\Phi)$")
-    ax.margins(x=0.15, y=0.06)   # room for the line labels
+    ax.set_ylabel(r"defect index  $R_q/\max(R_q)\cdot \Phi^+/\max(\Phi)$,  $\Phi^+ = \max(\Phi, 0)$")
+    ax.margins(x=0.12, y=0.08)   # room for the line labels
     ax.set_title("Spreading process map" + (f"\n{view.title()}" if view.title() else ""))
-    ax.legend(loc="best", fontsize=9)
     ax.grid(alpha=0.3)
+    return to_label, np.column_stack([runs_t, runs_d])
+
+
+def _label_candidates(xy, crowd):
+    """Anchor points along a line (its ends and 20 points between), the least crowded first.
+
+    ``crowd(points)`` counts what lies near each anchor (display coordinates); at equal
+    crowding an end comes first (the paper labels the lines' ends)."""
+    k = len(xy) - 1
+    at = np.unique(np.round(np.linspace(0, 1, 22) * k).astype(int))
+    ends = (at == 0) | (at == k)
+    order = np.lexsort((~ends, crowd(xy[at])))
+    return [xy[i] for i in at[order]]
+
+
+#: Offsets of a label from its anchor (points) and its alignment: right, left, above, below, diagonals.
+_OFFSETS = [((d, 0), ("left", "center")) for d in (4, 9)] + [((-d, 0), ("right", "center")) for d in (4, 9)] \
+    + [((0, d), ("center", "bottom")) for d in (4, 9, 14)] + [((0, -d), ("center", "top")) for d in (4, 9, 14)] \
+    + [((sx * d, sy * d), ("left" if sx > 0 else "right", "bottom" if sy > 0 else "top"))
+       for d in (3, 7, 12) for sx in (1, -1) for sy in (1, -1)]
+
+
+def place_labels(ax, lines, points=(), fontsize=8, pad=1.5):
+    """Label each line where the label overlaps no other label, no line and no point, inside the axes.
+
+    Tries anchors along each line (:func:`_label_candidates`) and offsets around each
+    (:data:`_OFFSETS`) in turn; the first free place wins. The figure's layout must be
+    final (drawn, its layout engine off): places are judged in display coordinates.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+    lines : list of (str, numpy.ndarray of shape (k, 2), colour)
+        Label text, the line's points in data coordinates, its colour.
+    points : array_like, shape (m, 2)
+        Markers (data coordinates) a label must not cover.
+    fontsize : float
+    pad : float
+        Clearance around a label, pixels.
+
+    Returns
+    -------
+    list of matplotlib.text.Text
+        The labels placed (a line with no free place gets none).
+    """
+    from matplotlib.path import Path as MplPath
+    from matplotlib.transforms import Bbox
+
+    renderer = ax.figure.canvas.get_renderer()
+    to_display = ax.transData.transform
+    paths = [MplPath(to_display(xy)) for _, xy, _ in lines]
+    dots = to_display(np.asarray(points, float).reshape(-1, 2)) if len(points) else np.empty((0, 2))
+    drawn = np.concatenate([path.vertices for path in paths] + [dots])
+    near = 30 * ax.figure.dpi / 72                     # 30 points
+
+    def crowd(anchors):
+        d = np.linalg.norm(to_display(anchors)[:, None, :] - drawn[None, :, :], axis=2)
+        return (d < near).sum(axis=1)
+
+    frame = ax.get_window_extent(renderer)
+    dot_r = 3.5 * ax.figure.dpi / 72          # a marker's radius (s = 22 points^2), pixels
+    placed, texts = [], []
+    for text, xy, colour in lines:
+        label = ax.annotate(text, xy[0], xytext=(0, 0), textcoords="offset points", color=colour,
+                            fontsize=fontsize, zorder=5, annotation_clip=False)
+        for anchor in _label_candidates(xy, crowd):
+            found = False
+            for offset, (ha, va) in _OFFSETS:
+                label.xy, label.xyann = tuple(anchor), offset
+                label.set_horizontalalignment(ha)
+                label.set_verticalalignment(va)
+                box = label.get_window_extent(renderer)
+                grown = Bbox.from_extents(box.x0 - pad, box.y0 - pad, box.x1 + pad, box.y1 + pad)
+                if not (frame.x0 <= grown.x0 and grown.x1 <= frame.x1 and frame.y0 <= grown.y0
+                        and grown.y1 <= frame.y1):
+                    continue
+                if any(grown.overlaps(other) for other in placed):
+                    continue
+                if any(path.intersects_bbox(grown, filled=False) for path in paths):
+                    continue
+                if len(dots) and ((dots[:, 0] > grown.x0 - dot_r) & (dots[:, 0] < grown.x1 + dot_r)
+                                  & (dots[:, 1] > grown.y0 - dot_r) & (dots[:, 1] < grown.y1 + dot_r)).any():
+                    continue
+                found = True
+                break
+            if found:
+                placed.append(grown)
+                texts.append(label)
+                break
+        else:
+            label.remove()
+    return texts
 
 
 def map_views(points, axes=tuple(INPUTS), hold=None, panels=None):
@@ -537,7 +778,8 @@ def map_views(points, axes=tuple(INPUTS), hold=None, panels=None):
     return sets
 
 
-def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, panels=None):
+def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, panels=None, window=None,
+                lines_model=None, lines_note=None):
     """Write every figure: surfaces, parity plots, process map (and uncertainty maps).
 
     The maps span two inputs (``axes``, default the paper's U and omega); the model's other
@@ -562,14 +804,21 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
         ``max(n, 101)`` points per line).
     axes, hold, panels
         As :func:`map_views` (config ``maps``).
+    window : dict, optional
+        ``max_porosity_pct`` and ``max_roughness_um`` (None: no limit) of the operating window
+        (config ``maps.operating_window``); None: no window map.
+    lines_model : estimator, optional
+        Draws the process map instead of ``model`` (a smooth model's iso-lines when the chosen
+        one is piecewise flat), ``lines_note`` saying so in its caption.
 
     Returns
     -------
     list of pathlib.Path
         ``<metric>_parity.{png,svg}`` (every point, once, in ``outdir``), and per map set
-        ``<metric>_surface.{png,svg}``, when the model gives calibrated intervals
-        ``<metric>_interval.{png,svg}`` (metric = dataset column, e.g. ``mass_g``), then
-        ``process_map.{png,svg}``.
+        ``<metric>_surface.{png,svg}``, ``<metric>_contour.{png,svg}``, when the model gives
+        calibrated intervals ``<metric>_interval.{png,svg}`` (metric = dataset column, e.g.
+        ``mass_g``), then ``process_map.{png,svg}`` and with ``window``
+        ``operating_window.{png,svg}``.
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
@@ -587,9 +836,15 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
             for metric in METRICS:
                 paths += save_figure(surface_figure(model, None, None, metric, n, panels=drawn), where,
                                      f"{metric}_surface")
+                paths += save_figure(contour_figure(model, None, None, metric, max(n, 61), panels=drawn), where,
+                                     f"{metric}_contour")
                 if provides_intervals(model):
                     paths += save_figure(interval_figure(model, None, None, metric, n, panels=drawn), where,
                                          f"{metric}_interval")
-            paths += save_figure(process_map_figure(model, None, None, max(n, 101), panels=drawn), where,
-                                 "process_map")
+            paths += save_figure(process_map_figure(lines_model or model, None, None, max(n, 101), panels=drawn,
+                                                    note=lines_note), where, "process_map")
+            if window is not None:
+                paths += save_figure(window_figure(model, None, None, window.get("max_porosity_pct"),
+                                                   window.get("max_roughness_um"), panels=drawn),
+                                     where, "operating_window")
     return paths
