@@ -1,0 +1,79 @@
+"""How big the calibration's characterisation tests must be: their result against their size, per seed.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_calibration_size.py [--level default] [--seeds 3]
+        [--repose 2,3,4,5,6] [--cups 1,1.5,2,3] [--name calibration_size]
+
+Runs the angle-of-repose heap on each base diameter [mm] and the bulk-density cup on each
+diameter (= height) [mm] with the config's material and the level's PSD, ``--seeds`` packings
+each, one LIGGGHTS at a time, and writes ``benchmarks/measured/<name>.csv`` (one row per run) and
+``<name>.md`` (mean and seed sd per size, wall time). A size is big enough when the means of it
+and of every bigger size agree within the seed sd (docs/calibration.md).
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from analysis.calibration.characterise import bulk_density_test, repose_test
+from analysis.config import PROJECT_DIR, load_config
+
+OUT = PROJECT_DIR / "benchmarks" / "measured"
+
+
+def _floats(text):
+    return [float(v) for v in text.split(",") if v]
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--level", default="default")
+    p.add_argument("--seeds", type=int, default=3)
+    p.add_argument("--repose", type=_floats, default=[2, 3, 4, 5, 6])
+    p.add_argument("--cups", type=_floats, default=[1, 1.5, 2, 3])
+    p.add_argument("--name", default="calibration_size")
+    a = p.parse_args(argv)
+    config = load_config(PROJECT_DIR / "config.yaml")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(a.seeds):
+            for d in a.repose:
+                r = repose_test(config, a.level, Path(tmp) / f"repose_{d}_{seed}", d, seed_index=seed)
+                rows.append({"test": "repose", "size_mm": d, "seed": seed, "value": r["angle_of_repose_deg"],
+                             "fit_se": r["angle_se_deg"], "particles": r["particles"], "wall_s": r["wall_s"]})
+                print(rows[-1], flush=True)
+            for d in a.cups:
+                r = bulk_density_test(config, a.level, Path(tmp) / f"cup_{d}_{seed}", d, d, seed_index=seed)
+                for kind in ("core", "cup"):
+                    rows.append({"test": f"bulk_density_{kind}", "size_mm": d, "seed": seed,
+                                 "value": r[f"{kind}_kg_m3"], "fit_se": float("nan"), "particles": r["particles"],
+                                 "wall_s": r["wall_s"]})
+                print(rows[-1], flush=True)
+    df = pd.DataFrame(rows)
+    OUT.mkdir(parents=True, exist_ok=True)
+    df.to_csv(OUT / f"{a.name}.csv", index=False)
+    table = df.groupby(["test", "size_mm"]).agg(mean=("value", "mean"), seed_sd=("value", "std"),
+                                                 particles=("particles", "first"), wall_s=("wall_s", "mean"))
+    lines = [f"# Characterisation tests against their size ({a.level} level, {a.seeds} seeds)", "",
+             f"`.venv/bin/python {' '.join(['benchmarks/bench_calibration_size.py', *sys.argv[1:]])}`, "
+             f"{time.strftime('%Y-%m-%d')}, {platform.node()}, one LIGGGHTS at a time.", "",
+             "repose: angle of repose [deg] on a base of size_mm diameter; bulk_density_core: the cup's "
+             "wall-free core [kg/m^3], bulk_density_cup: the whole struck-off cup [kg/m^3], cup diameter = "
+             "height = size_mm.", "", "| test | size (mm) | mean | seed sd | particles | wall (s) |",
+             "|---|---|---|---|---|---|"]
+    lines += [f"| {t} | {s:g} | {r['mean']:.4g} | {r['seed_sd']:.3g} | {r['particles']} | {r['wall_s']:.1f} |"
+              for (t, s), r in table.iterrows()]
+    (OUT / f"{a.name}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
