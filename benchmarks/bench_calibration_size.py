@@ -2,14 +2,15 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_calibration_size.py [--level default] [--seeds 3]
-        [--repose 2,3,4,5,6] [--cups 1,1.5,2,3] [--name calibration_size]
+    .venv/bin/python benchmarks/bench_calibration_size.py [--level default] [--seeds 0,1,2]
+        [--repose 2,3,4,5,6] [--cups 1.5,2,2.5,3] [--name calibration_size] [--append]
 
 Runs the angle-of-repose heap on each base diameter [mm] and the bulk-density cup on each
-diameter (= height) [mm] with the config's material and the level's PSD, ``--seeds`` packings
-each, one LIGGGHTS at a time, and writes ``benchmarks/measured/<name>.csv`` (one row per run) and
-``<name>.md`` (mean and seed sd per size, wall time). A size is big enough when the means of it
-and of every bigger size agree within the seed sd (docs/calibration.md).
+diameter (= height) [mm] with the config's material and the level's PSD, one packing per seed
+index, one LIGGGHTS at a time, and appends a row per run to ``benchmarks/measured/<name>.csv`` as
+it finishes (``--append`` keeps the rows already there, so an invocation may add seeds or sizes);
+``<name>.md`` summarises every row: mean and seed sd per size, wall time. A size is big enough
+when the means of it and of every bigger size agree within the seed sd (docs/calibration.md).
 """
 from __future__ import annotations
 
@@ -32,43 +33,54 @@ def _floats(text):
     return [float(v) for v in text.split(",") if v]
 
 
+def _ints(text):
+    return [int(v) for v in text.split(",") if v]
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--level", default="default")
-    p.add_argument("--seeds", type=int, default=3)
+    p.add_argument("--seeds", type=_ints, default=[0, 1, 2])
     p.add_argument("--repose", type=_floats, default=[2, 3, 4, 5, 6])
-    p.add_argument("--cups", type=_floats, default=[1, 1.5, 2, 3])
+    p.add_argument("--cups", type=_floats, default=[1.5, 2, 2.5, 3])
     p.add_argument("--name", default="calibration_size")
+    p.add_argument("--append", action="store_true")
     a = p.parse_args(argv)
     config = load_config(PROJECT_DIR / "config.yaml")
-    rows = []
+    csv = OUT / f"{a.name}.csv"
+    OUT.mkdir(parents=True, exist_ok=True)
+    if not a.append and csv.exists():
+        csv.unlink()
+
+    def record(row):
+        pd.DataFrame([row]).to_csv(csv, mode="a", header=not csv.exists(), index=False)
+        print(row, flush=True)
+
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(a.seeds):
-            for d in a.repose:
-                r = repose_test(config, a.level, Path(tmp) / f"repose_{d}_{seed}", d, seed_index=seed)
-                rows.append({"test": "repose", "size_mm": d, "seed": seed, "value": r["angle_of_repose_deg"],
-                             "fit_se": r["angle_se_deg"], "particles": r["particles"], "wall_s": r["wall_s"]})
-                print(rows[-1], flush=True)
+        for seed in a.seeds:
             for d in a.cups:
                 r = bulk_density_test(config, a.level, Path(tmp) / f"cup_{d}_{seed}", d, d, seed_index=seed)
                 for kind in ("core", "cup"):
-                    rows.append({"test": f"bulk_density_{kind}", "size_mm": d, "seed": seed,
-                                 "value": r[f"{kind}_kg_m3"], "fit_se": float("nan"), "particles": r["particles"],
-                                 "wall_s": r["wall_s"]})
-                print(rows[-1], flush=True)
-    df = pd.DataFrame(rows)
-    OUT.mkdir(parents=True, exist_ok=True)
-    df.to_csv(OUT / f"{a.name}.csv", index=False)
+                    record({"test": f"bulk_density_{kind}", "size_mm": d, "seed": seed, "value": r[f"{kind}_kg_m3"],
+                            "fit_se": float("nan"), "particles": r["particles"], "wall_s": r["wall_s"]})
+            for d in a.repose:
+                r = repose_test(config, a.level, Path(tmp) / f"repose_{d}_{seed}", d, seed_index=seed)
+                record({"test": "repose", "size_mm": d, "seed": seed, "value": r["angle_of_repose_deg"],
+                        "fit_se": r["angle_se_deg"], "particles": r["particles"], "wall_s": r["wall_s"]})
+    df = pd.read_csv(csv)
     table = df.groupby(["test", "size_mm"]).agg(mean=("value", "mean"), seed_sd=("value", "std"),
-                                                 particles=("particles", "first"), wall_s=("wall_s", "mean"))
-    lines = [f"# Characterisation tests against their size ({a.level} level, {a.seeds} seeds)", "",
+                                                 runs=("value", "size"), particles=("particles", "first"),
+                                                 wall_s=("wall_s", "mean"))
+    seeds = ", ".join(map(str, sorted(df.seed.unique())))
+    lines = [f"# Characterisation tests against their size ({a.level} level, seeds {seeds})", "",
              f"`.venv/bin/python {' '.join(['benchmarks/bench_calibration_size.py', *sys.argv[1:]])}`, "
              f"{time.strftime('%Y-%m-%d')}, {platform.node()}, one LIGGGHTS at a time.", "",
              "repose: angle of repose [deg] on a base of size_mm diameter; bulk_density_core: the cup's "
              "wall-free core [kg/m^3], bulk_density_cup: the whole struck-off cup [kg/m^3], cup diameter = "
-             "height = size_mm.", "", "| test | size (mm) | mean | seed sd | particles | wall (s) |",
-             "|---|---|---|---|---|---|"]
-    lines += [f"| {t} | {s:g} | {r['mean']:.4g} | {r['seed_sd']:.3g} | {r['particles']} | {r['wall_s']:.1f} |"
+             "height = size_mm.", "", "| test | size (mm) | mean | seed sd | runs | particles | wall (s) |",
+             "|---|---|---|---|---|---|---|"]
+    lines += [f"| {t} | {s:g} | {r['mean']:.4g} | {r['seed_sd']:.3g} | {r['runs']} | {int(r['particles'])} | "
+              f"{r['wall_s']:.1f} |"
               for (t, s), r in table.iterrows()]
     (OUT / f"{a.name}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

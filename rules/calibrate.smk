@@ -17,6 +17,8 @@ CAL_DESIGN = calibration_design(CAL_CONFIG) if CAL_CONFIG else None
 CAL_TESTS = calibration_tests(CAL_CONFIG) if CAL_CONFIG else []
 CAL_REPLICATES = CAL_CONFIG.get("replicates", 1)
 CAL_RUNS = [] if CAL_DESIGN is None else [f"{p}_r{r}" for r in range(CAL_REPLICATES) for p in CAL_DESIGN.index]
+# what a test run depends on besides its coefficients and seeds: a change re-runs it
+CAL_TEST_KEYS = ("level", "repose_base_diameter_mm", "cup_diameter_mm", "cup_height_mm", "max_time_s")
 # the tests' physics (material, PSD, time step, seeds): a change re-runs them
 CAL_PHYSICS = (
     simulation_fingerprint(
@@ -61,7 +63,7 @@ rule calibration_test:
     params:
         run=lambda w: _design_run(w.calrun),
         physics=CAL_PHYSICS,
-        calibration=lambda w: {k: v for k, v in CAL_CONFIG.items() if k != "measured"},
+        calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_TEST_KEYS},
     script:
         "../scripts/calibration_test.py"
 
@@ -99,7 +101,7 @@ rule calibration_check:
             "seed_index": CAL_REPLICATES * len(CAL_DESIGN) + int(w.check[1:]),
         },
         physics=CAL_PHYSICS,
-        calibration=lambda w: {k: v for k, v in CAL_CONFIG.items() if k != "measured"},
+        calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_TEST_KEYS},
     script:
         "../scripts/calibration_test.py"
 

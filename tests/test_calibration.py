@@ -137,3 +137,71 @@ def test_calibration_config_checks():
     with pytest.raises(CalibrationError, match="no measurement"):
         check_calibration(none)
     assert set(targets(CONFIG["calibration"])) <= {"angle_of_repose_deg", "bulk_density_kg_m3"}
+
+
+# --- real LIGGGHTS, smoke size: the workflow recovers a known rolling friction --------------------
+
+TRUE_ROLLING_FRICTION = 0.08
+#: Stated tolerance of the recovery (docs/calibration.md): the recovered rolling friction within this
+#: of the true one, and the true one inside the reported consistent range.
+RECOVERY_TOLERANCE = 0.04
+SMOKE_CALIBRATION = {
+    "level": "smoke", "coefficients": {"rolling_friction": [0.02, 0.2], "sliding_friction_particle": None}, "design_points": 4, "design_seed": 0,
+    "replicates": 1, "check_replicates": 0, "repose_base_diameter_mm": 2.5, "cup_diameter_mm": 2,
+    "cup_height_mm": 2, "max_time_s": 0.4, "grid_points": 201,
+}
+
+
+def _calibrate(workdir, measured_angle, sd):
+    """`snakemake calibrate` in ``workdir`` on the smoke calibration, calibrating to an angle only."""
+    cal = {**SMOKE_CALIBRATION, "measured": {"angle_of_repose_deg": measured_angle, "angle_of_repose_sd_deg": sd,
+                                             "bulk_density_kg_m3": None, "bulk_density_sd_kg_m3": 60,
+                                             "source": "synthetic, made by the simulation itself"}}
+    override = workdir / "calibration.yaml"
+    override.write_text(yaml.safe_dump({"calibration": cal}))
+    return subprocess.run([sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-d", str(workdir),
+                           "--configfile", str(ROOT / "config.yaml"), str(override), "--cores", "1", "calibrate"],
+                          capture_output=True, text=True)
+
+
+@pytest.fixture(scope="module")
+def synthetic_measurement(tmp_path_factory):
+    """The angle of repose the smoke heap gives at TRUE_ROLLING_FRICTION, with seeds no design run uses."""
+    from analysis.calibration.calibrate import with_coefficients
+    from analysis.calibration.characterise import repose_test
+    config = with_coefficients(CONFIG, {"rolling_friction": TRUE_ROLLING_FRICTION})
+    out = tmp_path_factory.mktemp("truth")
+    return repose_test(config, "smoke", out, SMOKE_CALIBRATION["repose_base_diameter_mm"], seed_index=97,
+                       max_time_s=SMOKE_CALIBRATION["max_time_s"])["angle_of_repose_deg"]
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory, synthetic_measurement):
+    workdir = tmp_path_factory.mktemp("calibrate")
+    proc = _calibrate(workdir, synthetic_measurement, 1.5)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return workdir
+
+
+def test_calibration_recovers_a_known_rolling_friction(calibrated, synthetic_measurement):
+    out = calibrated / "results/calibration"
+    solution = json.loads((out / "solution.json").read_text())
+    chosen, (lo, hi) = solution["chosen"]["rolling_friction"], solution["range"]["rolling_friction"]
+    assert abs(chosen - TRUE_ROLLING_FRICTION) <= RECOVERY_TOLERANCE, solution
+    assert lo - 0.01 <= TRUE_ROLLING_FRICTION <= hi + 0.01, solution
+    material = yaml.safe_load((out / "calibrated.yaml").read_text())["material"]
+    assert material["rolling_friction"] == pytest.approx(chosen, rel=1e-3)
+    report = (out / "report.md").read_text()
+    assert "response_surfaces.png" in report and "repose.png" in report
+    assert (out / "response_surfaces.png").stat().st_size > 10000 and (out / "repose.png").is_file()
+    results = pd.read_csv(out / "results.csv")
+    assert len(results) == 4 and results["angle_of_repose_deg"].between(5, 60).all()
+
+
+def test_unreachable_angle_is_refused_by_the_workflow(calibrated):
+    """The design already run: only the fit re-runs, and refuses with the range the box reaches."""
+    proc = _calibrate(calibrated, 75.0, 1.0)
+    assert proc.returncode != 0
+    assert re.search(r"angle_of_repose_deg 75 deg \+- 1 deg cannot be reached: .* gives [\d.]+ deg to [\d.]+ deg",
+                     proc.stderr), proc.stderr[-3000:]
+    assert "calibration_test" not in re.findall(r"rule (\w+):", proc.stdout + proc.stderr)

@@ -51,7 +51,9 @@ def check_calibration(config: dict) -> None:
     if cal["level"] not in config["fidelity"]:
         raise CalibrationError(f"config key 'calibration.level' = {cal['level']!r}: no such fidelity level; "
                                f"choose one of {sorted(config['fidelity'])}")
-    for name, (lo, hi) in cal["coefficients"].items():
+    if not coefficient_bounds(cal):
+        raise CalibrationError("config key 'calibration.coefficients': no coefficient to calibrate (all null)")
+    for name, (lo, hi) in coefficient_bounds(cal).items():
         if not hi > lo:
             raise CalibrationError(f"config key 'calibration.coefficients.{name}' = {[lo, hi]}: "
                                    "the range must have hi > lo")
@@ -60,8 +62,9 @@ def check_calibration(config: dict) -> None:
 
 
 def coefficient_bounds(cal: dict) -> dict[str, tuple[float, float]]:
-    """``{material key: (lo, hi)}`` of the coefficients being calibrated, in config order."""
-    return {name: (float(lo), float(hi)) for name, (lo, hi) in cal["coefficients"].items()}
+    """``{material key: (lo, hi)}`` of the coefficients being calibrated, in config order; a null
+    range leaves its coefficient at the material's value (a --configfile cannot delete a key)."""
+    return {name: (float(r[0]), float(r[1])) for name, r in cal["coefficients"].items() if r is not None}
 
 
 def targets(cal: dict) -> dict[str, tuple[float, float]]:

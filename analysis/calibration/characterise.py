@@ -25,8 +25,10 @@ from analysis.io import write_json
 from analysis.metrics.dump import read_dump
 from analysis.physics import liggghts_seeds, number_mean_volume
 
-#: Solid fraction of the loose insertion block (particles rain from it and settle).
+#: Solid fraction of the loose insertion block (particles rain from it and settle): the heap's tube,
+#: and the cup's (looser: a cup only a few large diameters wide packs its insertion block poorly).
 INSERT_SOLID_FRACTION = 0.3
+CUP_INSERT_SOLID_FRACTION = 0.2
 #: Solid fraction assumed of the settled powder when sizing a fill.
 SETTLED_SOLID_FRACTION = 0.6
 #: The heap test's tube holds this many times the solid volume of a cone of HEAP_SIZING_ANGLE
@@ -86,10 +88,10 @@ def _run_scene(template: str, config: dict, level: str, outdir: Path, seed_index
                                                 "seed_index": seed_index, **peak}}
 
 
-def _fill_top(particles: int, s, radius: float) -> float:
-    """Height [m] of the loose insertion cylinder for ``particles`` in a tube of ``radius``."""
+def _fill_top(particles: int, s, radius: float, fraction: float = INSERT_SOLID_FRACTION) -> float:
+    """Height [m] of the insertion cylinder for ``particles`` in a tube of ``radius`` at solid ``fraction``."""
     volume = particles * number_mean_volume(s.diameters, s.mass_fractions)
-    return volume / (INSERT_SOLID_FRACTION * pi * (radius - max(s.diameters) / 2) ** 2)
+    return volume / (fraction * pi * (radius - max(s.diameters) / 2) ** 2)
 
 
 def repose_test(config: dict, level: str, outdir: str | Path, base_diameter_mm: float, seed_index: int = 0,
@@ -177,7 +179,7 @@ def bulk_density_test(config: dict, level: str, outdir: str | Path, cup_diameter
     radius, rim = cup_diameter_mm * 1e-3 / 2, cup_height_mm * 1e-3
     particles = ceil(CUP_EXCESS * SETTLED_SOLID_FRACTION * pi * radius**2 * rim
                      / number_mean_volume(s.diameters, s.mass_fractions))
-    top = _fill_top(particles, s, radius)
+    top = _fill_top(particles, s, radius, CUP_INSERT_SOLID_FRACTION)
     margin = radius + 0.5e-3
     box = [-margin, margin, -margin, margin, -0.5e-3, top + 1e-3]
     done = _run_scene("bulk_density.in.j2", config, level, outdir, seed_index, radius, particles, top, box,
