@@ -45,6 +45,7 @@ def main(argv=None) -> int:
     p.add_argument("--cups", type=_floats, default=[1.5, 2, 2.5, 3])
     p.add_argument("--name", default="calibration_size")
     p.add_argument("--append", action="store_true")
+    p.add_argument("--note", default="", help="a line for the summary (e.g. how its rows were run)")
     a = p.parse_args(argv)
     config = load_config(PROJECT_DIR / "config.yaml")
     csv = OUT / f"{a.name}.csv"
@@ -72,14 +73,16 @@ def main(argv=None) -> int:
                                                  runs=("value", "size"), particles=("particles", "first"),
                                                  wall_s=("wall_s", "mean"))
     seeds = ", ".join(map(str, sorted(df.seed.unique())))
+    argv = sys.argv[1:] if argv is None else list(argv)
+    shown = [v for i, v in enumerate(argv) if "--note" not in argv[max(i - 1, 0):i + 1]]
     lines = [f"# Characterisation tests against their size ({a.level} level, seeds {seeds})", "",
-             f"`.venv/bin/python {' '.join(['benchmarks/bench_calibration_size.py', *sys.argv[1:]])}`, "
-             f"{time.strftime('%Y-%m-%d')}, {platform.node()}, one LIGGGHTS at a time.", "",
+             f"`.venv/bin/python {' '.join(['benchmarks/bench_calibration_size.py', *shown])}`, "
+             f"{time.strftime('%Y-%m-%d')}, {platform.node()}, one LIGGGHTS at a time. {a.note}", "",
              "repose: angle of repose [deg] on a base of size_mm diameter; bulk_density_core: the cup's "
              "wall-free core [kg/m^3], bulk_density_cup: the whole struck-off cup [kg/m^3], cup diameter = "
              "height = size_mm.", "", "| test | size (mm) | mean | seed sd | runs | particles | wall (s) |",
              "|---|---|---|---|---|---|---|"]
-    lines += [f"| {t} | {s:g} | {r['mean']:.4g} | {r['seed_sd']:.3g} | {r['runs']} | {int(r['particles'])} | "
+    lines += [f"| {t} | {s:g} | {r['mean']:.4g} | {r['seed_sd']:.3g} | {int(r['runs'])} | {int(r['particles'])} | "
               f"{r['wall_s']:.1f} |"
               for (t, s), r in table.iterrows()]
     (OUT / f"{a.name}.md").write_text("\n".join(lines) + "\n")

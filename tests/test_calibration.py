@@ -146,7 +146,8 @@ TRUE_ROLLING_FRICTION = 0.08
 #: of the true one, and the true one inside the reported consistent range.
 RECOVERY_TOLERANCE = 0.04
 SMOKE_CALIBRATION = {
-    "level": "smoke", "coefficients": {"rolling_friction": [0.02, 0.2], "sliding_friction_particle": None}, "design_points": 4, "design_seed": 0,
+    "level": "smoke", "coefficients": {"rolling_friction": [0.02, 0.2], "sliding_friction_particle": None},
+    "design_points": 4, "design_seed": 0,
     "replicates": 1, "check_replicates": 0, "repose_base_diameter_mm": 2.5, "cup_diameter_mm": 2,
     "cup_height_mm": 2, "max_time_s": 0.4, "grid_points": 201,
 }
