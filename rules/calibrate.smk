@@ -2,7 +2,7 @@
 # characterisation tests (angle of repose, bulk density) over a design of contact coefficients,
 # fits the surrogate, solves for the coefficients that reproduce calibration.measured, writes them
 # as a config file for --configfile and a report page, and re-runs them with new seeds.
-from analysis.calibration.calibrate import CalibrationError, check_calibration
+from analysis.calibration.calibrate import CalibrationError, check_calibration, design_run
 from analysis.calibration.calibrate import design as calibration_design
 from analysis.calibration.calibrate import tests_needed as calibration_tests
 
@@ -43,15 +43,6 @@ localrules:
     calibrate,
 
 
-def _design_run(calrun):
-    """Coefficients and seed index of a design run `p<i>_r<rep>`: each run its own seeds."""
-    point, rep = calrun.split("_r")
-    return {
-        "coefficients": CAL_DESIGN.loc[point].to_dict(),
-        "seed_index": int(rep) * len(CAL_DESIGN) + CAL_DESIGN.index.get_loc(point),
-    }
-
-
 rule calibration_test:
     """One characterisation test (repose heap or bulk-density cup) at one design point and replicate."""
     output:
@@ -61,7 +52,7 @@ rule calibration_test:
     benchmark:
         f"results/benchmarks/calibration/{{calrun}}_{{caltest}}.tsv"
     params:
-        run=lambda w: _design_run(w.calrun),
+        run=lambda w: design_run(CAL_DESIGN, w.calrun),
         physics=CAL_PHYSICS,
         calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_TEST_KEYS},
     script:

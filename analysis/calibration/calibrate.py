@@ -91,6 +91,14 @@ def design(cal: dict) -> pd.DataFrame:
     return pd.DataFrame(points, columns=list(bounds), index=[f"p{i:0{width}d}" for i in range(n)])
 
 
+def design_run(table: pd.DataFrame, run: str) -> dict:
+    """Coefficients and seed index of the design run ``p<i>_r<rep>`` of the design ``table``:
+    every run its own seeds (:func:`analysis.calibration.characterise.test_seeds`)."""
+    point, rep = run.split("_r")
+    return {"coefficients": table.loc[point].to_dict(),
+            "seed_index": int(rep) * len(table) + table.index.get_loc(point)}
+
+
 def with_coefficients(config: dict, coefficients: dict) -> dict:
     """A copy of ``config`` whose ``material`` holds ``coefficients`` (material keys)."""
     out = copy.deepcopy(config)
