@@ -143,8 +143,11 @@ def test_calibration_config_checks():
 
 TRUE_ROLLING_FRICTION = 0.08
 #: Stated tolerance of the recovery (docs/calibration.md): the recovered rolling friction within this
-#: of the true one, and the true one inside the reported consistent range.
-RECOVERY_TOLERANCE = 0.04
+#: of the true one, and the true one inside the reported consistent range. The 2.5 mm smoke heap's
+#: seed sd, 2.4-3 deg (calibration_size.md, 2-3 mm bases), is about 0.03 of rolling friction here.
+RECOVERY_TOLERANCE = 0.05
+#: The synthetic measurement's sd [deg]: that seed sd (one run of the simulation is the "measurement").
+MEASUREMENT_SD = 2.5
 SMOKE_CALIBRATION = {
     "level": "smoke", "coefficients": {"rolling_friction": [0.02, 0.2], "sliding_friction_particle": None},
     "design_points": 4, "design_seed": 0,
@@ -179,7 +182,7 @@ def synthetic_measurement(tmp_path_factory):
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory, synthetic_measurement):
     workdir = tmp_path_factory.mktemp("calibrate")
-    proc = _calibrate(workdir, synthetic_measurement, 1.5)
+    proc = _calibrate(workdir, synthetic_measurement, MEASUREMENT_SD)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return workdir
 
@@ -188,8 +191,9 @@ def test_calibration_recovers_a_known_rolling_friction(calibrated, synthetic_mea
     out = calibrated / "results/calibration"
     solution = json.loads((out / "solution.json").read_text())
     chosen, (lo, hi) = solution["chosen"]["rolling_friction"], solution["range"]["rolling_friction"]
+    print(f"rolling friction: true {TRUE_ROLLING_FRICTION}, recovered {chosen:.4g} (consistent {lo:.4g}..{hi:.4g})")
     assert abs(chosen - TRUE_ROLLING_FRICTION) <= RECOVERY_TOLERANCE, solution
-    assert lo - 0.01 <= TRUE_ROLLING_FRICTION <= hi + 0.01, solution
+    assert lo <= TRUE_ROLLING_FRICTION <= hi, solution
     material = yaml.safe_load((out / "calibrated.yaml").read_text())["material"]
     assert material["rolling_friction"] == pytest.approx(chosen, rel=1e-3)
     report = (out / "report.md").read_text()
