@@ -29,6 +29,7 @@ include: "rules/simulate.smk"
 include: "rules/metrics.smk"
 include: "rules/surrogate.smk"
 include: "rules/maps.smk"
+include: "rules/calibrate.smk"
 
 
 # On a cluster (profiles/slurm) only settle and spread are submitted; the rest is light.
