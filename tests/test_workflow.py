@@ -75,9 +75,9 @@ def test_dataset_has_one_sane_row_per_run(workflow):
     # eq. 5: Q_s = U thk_avg
     assert np.allclose(data.throughput_mm2_s, data.U_mm_s * data.thickness_um * 1e-3)
     assert np.all(data.wall_s > 0) and np.all(data.steps > 0)
-    # the smoke scene's fed pile lasts at the points the tests use (about its 5 mg is left at the
-    # end: the heap's own 400 particles weigh 5.3 mg); LIGGGHTS' own CPU time is the cost
-    assert not data.heap_exhausted.any() and np.all(data.supply_margin > 0.5)
+    # the smoke scene's pile (760 particles, fed from above where it has room) lasts at the points the
+    # tests use: forward rolling at U = 100 mm/s leaves about a sixth of it; LIGGGHTS' own CPU time is the cost
+    assert not data.heap_exhausted.any() and np.all(data.supply_margin > 0.05)
     assert np.all(data.fed_particles[data.omega_rad_s < 0] > data.fed_particles[data.omega_rad_s > 0].max())
     assert np.all((data.cpu_s > 0) & (data.cpu_s <= 1.05 * data.wall_s))  # one rank: CPU within the wall time
 
