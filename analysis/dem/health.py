@@ -188,7 +188,7 @@ def inrun_health(log: dict, s: Scene) -> dict:
             "squeeze_out_samples": int(np.sum(squeezed > 0))}
 
 
-def feed_landings(folder: Path, printed: dict, roller_x, timestep: float, landed_at: dict) -> pd.DataFrame:
+def feed_landings(folder: Path, printed: dict, roller_x, landed_at: dict) -> pd.DataFrame:
     """Where each fed particle landed: one row per particle of the top-up dumps
     ``folder/landed.<step>.dump`` (written by ``spread.in.j2`` at the next top-up or the
     travel's end, step ``landed_at[step]``).
@@ -196,13 +196,16 @@ def feed_landings(folder: Path, printed: dict, roller_x, timestep: float, landed
     ``roller_x(step)`` is the roller axis' x [m] at a step. Columns: ``id``, ``topup_step``,
     ``x_landed_m``, ``radius_m``, ``front_m`` (the pile's front measured at the top-up),
     ``ahead_of_front_m`` (landed x less that front carried on by the roller's travel since)
-    and ``ahead_of_roller_m`` (landed x less the roller axis' x when it was written down)."""
+    and ``ahead_of_roller_m`` (landed x less the roller axis' x when it was written down). A run
+    resumed from a checkpoint has the dumps its killed attempt wrote, but their fronts (NaN) only
+    where its own log printed them."""
     rows = []
     for path in sorted(Path(folder).glob("landed.*.dump"), key=lambda p: int(p.name.split(".")[1])):
         step = int(path.name.split(".")[1])
         atoms = read_dump(path).atoms
         end = landed_at[step]
-        front = printed[f"feed_front_{step}"]
+        # a top-up before a resumed attempt printed its front in the killed attempt's log
+        front = printed.get(f"feed_front_{step}", np.nan)
         rows.append(pd.DataFrame({
             "id": atoms["id"].to_numpy(), "topup_step": step, "x_landed_m": atoms["x"].to_numpy(),
             "radius_m": atoms["radius"].to_numpy(), "front_m": front,
@@ -223,7 +226,8 @@ def feed_health(landings: pd.DataFrame, atoms, first_fed_id: int, region: tuple)
     fed = inside & (atoms["id"].to_numpy() >= first_fed_id)
     in_layer = landings[landings["id"].isin(atoms["id"].to_numpy()[fed])]
     ahead = in_layer["ahead_of_roller_m"].to_numpy() * 1e3
-    return {"fed_max_ahead_of_front_mm": float(landings["ahead_of_front_m"].max() * 1e3) if len(landings) else 0.0,
+    ahead_of_front = landings["ahead_of_front_m"].dropna()
+    return {"fed_max_ahead_of_front_mm": float(ahead_of_front.max() * 1e3) if len(ahead_of_front) else 0.0,
             "fed_share_of_region_layer": float(fed.sum() / max(inside.sum(), 1)),
             "fed_in_region_landed_ahead_of_roller_mm_median": float(np.median(ahead)) if len(ahead) else 0.0,
             "fed_in_region_landed_ahead_of_roller_mm_max": float(ahead.max()) if len(ahead) else 0.0}

@@ -364,7 +364,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                   mass_ahead_of_roller_kg=float(log["printed"]["mass_ahead_of_roller_kg"]))
     if feeds:
         landings = feed_landings(out / FEED_DIR, log["printed"], lambda step: x0 + speed * step * s.timestep,
-                                 s.timestep, dict(zip(feeds, feeds[1:] + [travel_steps])))
+                                 dict(zip(feeds, feeds[1:] + [travel_steps])))
         landings.to_csv(out / "feed_landings.csv", index=False)
         health.update(feed_topups=len(feeds), **feed_health(landings, atoms, first_fed_id, s.sampling_region))
     thermo = log["thermo"]
