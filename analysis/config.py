@@ -8,10 +8,12 @@ simulation starts.
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import itertools
 import json
 import math
+import re
 from dataclasses import dataclass
 from math import sqrt
 from pathlib import Path
@@ -31,19 +33,47 @@ class ConfigError(ValueError):
     """A configuration value is wrong; the message names its key and value."""
 
 
-def coerce_cli_values(value):
+class StrictLoader(yaml.SafeLoader):
+    """YAML as its 1.2 core schema reads it: ``true``/``false`` are the only booleans (``yes``,
+    ``on``, ``y`` stay strings, which the schema then refuses where a boolean is wanted), and
+    ``1e9`` is a number (YAML 1.1 wants ``1.0e+9``)."""
+
+
+StrictLoader.yaml_implicit_resolvers = {
+    first: [(tag, regex) for tag, regex in resolvers if tag != "tag:yaml.org,2002:bool"]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+StrictLoader.add_implicit_resolver("tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
+                                   list("tTfF"))
+StrictLoader.add_implicit_resolver("tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$"),
+                                   list("-+0123456789"))
+
+
+def parse_yaml(text: str, source: str):
+    """``text`` parsed by :class:`StrictLoader`; a syntax error is one :class:`ConfigError` line
+    naming ``source`` (a file, or a ``--config`` argument) and the line and column."""
+    try:
+        return yaml.load(text, Loader=StrictLoader)  # noqa: S506 (a SafeLoader)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        what = " ".join(str(getattr(err, "problem", None) or err).split())
+        raise ConfigError(f"{source}: YAML syntax error{where}: {what}") from None
+
+
+def coerce_cli_values(value, key: str = ""):
     """Numbers, booleans and nulls from strings, recursively.
 
     Snakemake parses nested ``--config key='{...}'`` values with YAML's
     BaseLoader, which leaves every scalar a string; this restores the types
-    so that ``--config sweep='{"U_mm_s": [40, 70]}'`` works.
+    so that ``--config sweep='{"U_mm_s": [40, 70]}'`` works. A value that is
+    not YAML raises :class:`ConfigError` naming ``--config <key>=<value>``.
     """
     if isinstance(value, dict):
-        return {k: coerce_cli_values(v) for k, v in value.items()}
+        return {k: coerce_cli_values(v, f"{key}.{k}" if key else str(k)) for k, v in value.items()}
     if isinstance(value, list):
-        return [coerce_cli_values(v) for v in value]
+        return [coerce_cli_values(v, key) for v in value]
     if isinstance(value, str):
-        return yaml.safe_load(value) if value.strip() else value
+        return parse_yaml(value, f"--config {key}={value}") if value.strip() else value
     return value
 
 
@@ -66,13 +96,27 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
         path = Path(source)
         if not path.is_file():
             raise ConfigError(f"config file {str(path)!r} does not exist")
-        config = yaml.safe_load(path.read_text())
+        config = read_config_file(path)
         base_dir = path.parent if base_dir is None else base_dir
     else:
         config = copy.deepcopy(source)
     check_finite(config)
     validate_schema(config)
     check_config(config, Path(base_dir or "."))
+    return config
+
+
+def read_config_file(path: str | Path) -> dict:
+    """The mapping in a YAML config file; an empty file, a syntax error or a top level that is
+    not a mapping raises one :class:`ConfigError` line naming the file (and the line, column)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{path}: not a YAML text file ({err.reason} at byte {err.start})") from None
+    config = parse_yaml(text, str(path))
+    if not isinstance(config, dict):
+        raise ConfigError(f"{path}: " + ("empty: no config keys" if config is None else
+                                         f"holds a {type(config).__name__}, not a mapping of config keys"))
     return config
 
 
@@ -92,9 +136,17 @@ def check_finite(config, key: str = "") -> None:
         _fail(key or "<top level>", config, "must be a finite number")
 
 
+#: JSON Schema counts 2.0 as an integer; a count or a seed written 2.0 is refused instead
+#: (``range(2.0)`` and a seed of '11027.0' fail later, far from the key).
+_Validator = jsonschema.validators.extend(
+    jsonschema.Draft202012Validator,
+    type_checker=jsonschema.Draft202012Validator.TYPE_CHECKER.redefine(
+        "integer", lambda _, value: isinstance(value, int) and not isinstance(value, bool)))
+
+
 def validate_schema(config: dict) -> None:
     """Raise :class:`ConfigError` on the first schema violation, naming key and value."""
-    validator = jsonschema.Draft202012Validator(load_schema())
+    validator = _Validator(load_schema())
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
     if errors:
         error = errors[0]
@@ -181,6 +233,39 @@ def check_physics(config: dict, base_dir: Path = Path(".")) -> None:
         if lvl["sampling_start_mm"] < lvl["heap_length_mm"]:
             _fail(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
                   f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")
+    check_bounds(config)
+
+
+#: The most time steps one LIGGGHTS ``run`` command takes (a signed 32-bit count):
+#: beyond it LIGGGHTS stops with "Invalid run command".
+MAX_RUN_STEPS = 2**31 - 1
+
+#: Nodes of the generated rough substrate at most (its random field and mesh: about 1 kB a node).
+MAX_SUBSTRATE_NODES = 10_000_000
+
+#: The roller's surface moves at most this fraction of the smallest particle's radius in a time step.
+MAX_WALL_STEP = 0.1
+
+
+def check_bounds(config: dict) -> None:
+    """Bounds that hold between keys: each level's settle and rest fit LIGGGHTS' run command
+    (:data:`MAX_RUN_STEPS`) and its generated substrate the memory (:data:`MAX_SUBSTRATE_NODES`)."""
+    fraction = config["timestep"]["rayleigh_fraction"]
+    for name, lvl in config["fidelity"].items():
+        s = scene(config, name)
+        for key in ("settle_time_s", "rest_time_s"):
+            steps = lvl[key] / s.timestep
+            if steps > MAX_RUN_STEPS:
+                _fail(f"fidelity.{name}.{key}", lvl[key],
+                      f"takes {steps:.3g} time steps of {s.timestep:.3g} s (timestep.rayleigh_fraction = {fraction!r}):"
+                      f" at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
+        if config["substrate"]["mesh"] is None:
+            spacing = config["substrate"]["grid_spacing_um"] * 1e-6
+            nodes = ((s.rough_x[1] - s.rough_x[0] + 1e-3) / spacing + 1) * (s.strip_width / spacing + 1)
+            if nodes > MAX_SUBSTRATE_NODES:
+                _fail("substrate.grid_spacing_um", config["substrate"]["grid_spacing_um"],
+                      f"gives fidelity.{name}'s rough substrate {nodes:.3g} nodes: at most {MAX_SUBSTRATE_NODES:.0e}"
+                      " (memory)")
 
 
 def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
@@ -240,6 +325,34 @@ def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
     if config["surrogate"]["n_test"] > n_points - 3:
         _fail("surrogate.n_test", config["surrogate"]["n_test"],
               f"leaves fewer than 3 of the sweep's {n_points} points to train on")
+    if config["surrogate"]["cv_folds"] > n_points:
+        _fail("surrogate.cv_folds", config["surrogate"]["cv_folds"],
+              f"exceeds the sweep's {n_points} points (each fold holds out whole points)")
+    check_speeds(config)
+
+
+def check_speeds(config: dict) -> None:
+    """Each run's speeds against its time step: the slowest travel fits a LIGGGHTS run
+    (:data:`MAX_RUN_STEPS`), the roller's surface moves less than :data:`MAX_WALL_STEP` of the
+    smallest radius a step."""
+    for values in variants(config):
+        s = scene(resolve(config, values))
+        points = [p for p in sweep_points(config) if all(p[k] == v for k, v in values.items())]
+        slowest = min(points, key=lambda p: p["U_mm_s"])
+        steps = (s.travel_end - s.box[0]) / (slowest["U_mm_s"] * 1e-3) / s.timestep
+        if steps > MAX_RUN_STEPS:
+            _fail("sweep.U_mm_s", slowest["U_mm_s"], f"needs {steps:.3g} time steps of {s.timestep:.3g} s to travel "
+                  f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm: at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
+        r_min = min(s.diameters) / 2
+        for p in points:
+            wall = (p["U_mm_s"] * 1e-3 + abs(p["omega_rad_s"]) * s.roller_radius) * s.timestep
+            if wall > MAX_WALL_STEP * r_min:
+                key = "sweep.U_mm_s" if p["U_mm_s"] * 1e-3 >= abs(p["omega_rad_s"]) * s.roller_radius \
+                    else "sweep.omega_rad_s"
+                _fail(key, p[key.split(".")[1]],
+                      f"moves the roller's surface {wall * 1e6:.3g} um a time step of {s.timestep:.3g} s (U = "
+                      f"{p['U_mm_s']:g} mm/s, omega = {p['omega_rad_s']:g} rad/s): more than {MAX_WALL_STEP:g} of the "
+                      f"smallest radius ({r_min * 1e6:.3g} um); lower the speeds or timestep.rayleigh_fraction")
 
 
 def _check_variant(config: dict, values: dict, base_dir: Path, key: str, shown) -> None:
@@ -320,6 +433,8 @@ def resolve(config: dict, values: dict) -> dict:
         node = out
         for k in path:
             node = node[k]
+        if isinstance(node[last], int) and not isinstance(node[last], bool) and float(value).is_integer():
+            value = int(value)      # a swept count stays an integer (the sweep reads its values as floats)
         if node[last] != value:     # the config's own value keeps its type (300, not 300.0): same fingerprint
             node[last] = value
     return out

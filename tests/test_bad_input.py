@@ -1,0 +1,127 @@
+"""Bad input, second pass (#35): each probe refused in one line naming the key or the file,
+before any engine runs, with nothing half-written."""
+import copy
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from analysis.config import ConfigError, coerce_cli_values, load_config, sweep_runs
+from tests.test_config import ROOT
+
+BASE = yaml.safe_load((ROOT / "config.yaml").read_text())
+
+
+def with_values(**values):
+    """The shipped config with dotted keys (``__`` for ``.``) set."""
+    config = copy.deepcopy(BASE)
+    for dotted, value in values.items():
+        *path, last = dotted.split("__")
+        node = config
+        for key in path:
+            node = node[key]
+        node[last] = value
+    return config
+
+
+def refused(config) -> str:
+    with pytest.raises(ConfigError) as err:
+        load_config(config, base_dir=ROOT)
+    message = str(err.value)
+    assert "\n" not in message, message
+    return message
+
+
+# ------------------------------------------------------------------ the config
+
+
+@pytest.mark.parametrize("dotted, value", [
+    ("sweep__replicates", 2.0), ("fidelity__smoke__size_classes", 3.0), ("roller__facets_around", 90.0),
+    ("random_seed", 1.0), ("fidelity__default__heap_particles", 300.0),
+])
+def test_whole_number_floats_are_refused_where_integers_are_wanted(dotted, value):
+    message = refused(with_values(**{dotted: value}))
+    assert dotted.replace("__", ".") in message and f"{value!r} is not of type 'integer'" in message
+
+
+def test_a_swept_integer_key_stays_an_integer():
+    config = load_config(with_values(level="smoke", sweep__U_mm_s=[40, 70], sweep__omega_rad_s=[-5, 0, 5], surrogate__n_test=2,
+                                     **{"sweep__fidelity.smoke.heap_particles": [400, 500]}), base_dir=ROOT)
+    assert len(sweep_runs(config)) == 12
+
+
+@pytest.mark.parametrize("dotted, value, words", [
+    ("sweep__U_mm_s", [40, 1e12], "maximum of 2000"),
+    ("sweep__omega_rad_s", [0, -5000], "minimum of -1000"),
+    ("roller__gap_um", 1e9, "maximum of 10000"),
+    ("timestep__rayleigh_fraction", 1e-12, "minimum of 0.01"),
+    ("fidelity__default__heap_particles", 10**9, "maximum of 10000000"),
+    ("fidelity__default__profilometer_lines", 100000, "maximum of 4000"),
+    ("substrate__grid_spacing_um", 1e-6, "at most 1e+07 (memory)"),
+    ("surrogate__grid_points", 100000, "maximum of 1001"),
+    ("sweep__U_mm_s", [1e-9, 40], "at most 2147483647 fit a LIGGGHTS run"),
+    ("fidelity__smoke__settle_time_s", 1e6, "at most 2147483647 fit a LIGGGHTS run"),
+    ("sweep__U_mm_s", [40, 1900], "more than 0.1 of the smallest radius"),
+    ("surrogate__cv_folds", 50, "exceeds the sweep's 45 points"),
+])
+def test_values_beyond_a_bound_are_refused_by_key_with_the_bound(dotted, value, words):
+    message = refused(with_values(**{dotted: value}))
+    assert dotted.split("__")[-1] in message and words in message, message
+
+
+def test_a_boolean_given_as_a_string_is_refused():
+    assert "'keep_supply_limited_runs'" in refused(with_values(keep_supply_limited_runs="yes"))
+    cli = coerce_cli_values({"keep_supply_limited_runs": "yes"})  # --config keep_supply_limited_runs=yes
+    assert cli == {"keep_supply_limited_runs": "yes"}
+    assert coerce_cli_values({"a": "true", "b": "1e9", "c": "40"}) == {"a": True, "b": 1e9, "c": 40}
+
+
+def test_a_yaml_error_in_a_config_argument_names_it_with_line_and_column():
+    with pytest.raises(ConfigError) as err:
+        coerce_cli_values({"sweep": '{"U_mm_s": [40, 70}'})
+    assert str(err.value) == ("--config sweep={\"U_mm_s\": [40, 70}: YAML syntax error at line 1, column 19: "
+                              "expected ',' or ']', but got '}'")
+
+
+@pytest.mark.parametrize("text, words", [
+    ("level: smoke\nsweep:\n  U_mm_s: [40, 70\n  replicates: 1\n", "YAML syntax error at line 4, column 13"),
+    ("", "empty: no config keys"),
+    ("- 1\n- 2\n", "holds a list, not a mapping"),
+    ("\xff\xfe", "not a YAML text file"),
+])
+def test_a_broken_config_file_is_one_line_naming_the_file(tmp_path, text, words):
+    path = tmp_path / "bad.yaml"
+    path.write_bytes(text.encode("latin-1"))
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    assert str(err.value).startswith(f"{path}: ") and words in str(err.value) and "\n" not in str(err.value)
+
+
+def test_simulate_cli_with_a_broken_config_file_is_one_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("level: smoke\nsweep: {U_mm_s: [40, 70}\n")
+    res = subprocess.run([sys.executable, "-m", "analysis.dem.simulate", "geometry", "--config", str(bad),
+                          "--out", str(tmp_path / "m")], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr == f"spreadmap-simulate: error: {bad}: YAML syntax error at line 2, column 24: " \
+                         "expected ',' or ']', but got '}'\n"
+    assert not (tmp_path / "m").exists()
+
+
+def test_snakemake_names_a_broken_config_argument_and_the_config_file(tmp_path):
+    """The README's --config form with one typo, and a config.yaml with a syntax error: one line each."""
+    def dry_run(*extra, workdir):
+        proc = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1", "-d", str(workdir),
+                               "-s", str(ROOT / "Snakefile"), *extra], capture_output=True, text=True, cwd=ROOT)
+        assert proc.returncode != 0
+        return proc.stdout + proc.stderr
+
+    out = dry_run("--configfile", str(ROOT / "config.yaml"), "--config", 'sweep={"U_mm_s": [40, 70}',
+                  workdir=tmp_path / "a")
+    assert "--config sweep={\"U_mm_s\": [40, 70}: YAML syntax error at line 1, column 19" in out
+    assert "Traceback" not in out and not (tmp_path / "a" / "results").exists()
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "config.yaml").write_text("level: smoke\nsweep:\n  U_mm_s: [40, 70\n  replicates: 1\n")
+    out = dry_run(workdir=tmp_path / "b")
+    assert "config.yaml: YAML syntax error at line 4, column 13" in out and "Traceback" not in out
