@@ -300,19 +300,9 @@ def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
     for values in run:                      # and every combination run (cross-key facts between axes)
         if len(values) > 1:
             _check_variant(config, values, base_dir, "sweep", values)
-    gap = config["roller"]["gap_um"]
     for value in dict.fromkeys([*sweep.get("roller.gap_um", []), *(v["roller.gap_um"] for v in run
                                                                     if "roller.gap_um" in v)]):
-        if value < gap:
-            _fail("sweep.roller.gap_um", value,
-                  f"is below roller.gap_um = {gap!r}, the gap the heap is settled and the substrate's peaks "
-                  f"are capped under (at {PEAK_CAP:g} x) for every swept gap: set roller.gap_um to the "
-                  "smallest swept gap")
-        spread, heap_box = scene(resolve(config, {"roller.gap_um": value})), scene(config).box
-        if spread.box[1] > heap_box[1] or spread.roller_gap + 2 * spread.roller_radius > heap_box[5]:
-            _fail("sweep.roller.gap_um", value,
-                  f"puts the roller or its feed outside the simulation box of the heap settled at "
-                  f"roller.gap_um = {gap!r} (the spread starts from its restart): sweep gaps closer to it")
+        check_swept_gap(config, value)
     runs = sweep_runs(config)
     names = [run.name for run in runs]
     repeated = sorted({n for n in names if names.count(n) > 1})
@@ -353,6 +343,21 @@ def check_speeds(config: dict) -> None:
                       f"moves the roller's surface {wall * 1e6:.3g} um a time step of {s.timestep:.3g} s (U = "
                       f"{p['U_mm_s']:g} mm/s, omega = {p['omega_rad_s']:g} rad/s): more than {MAX_WALL_STEP:g} of the "
                       f"smallest radius ({r_min * 1e6:.3g} um); lower the speeds or timestep.rayleigh_fraction")
+
+
+def check_swept_gap(config: dict, value: float) -> None:
+    """A swept gap spreads the heap settled under ``roller.gap_um``: at least that gap, and in its box."""
+    gap = config["roller"]["gap_um"]
+    if value < gap:
+        _fail("sweep.roller.gap_um", value,
+              f"is below roller.gap_um = {gap!r}, the gap the heap is settled and the substrate's peaks "
+              f"are capped under (at {PEAK_CAP:g} x) for every swept gap: set roller.gap_um to the "
+              "smallest swept gap")
+    spread, heap_box = scene(resolve(config, {"roller.gap_um": value})), scene(config).box
+    if spread.box[1] > heap_box[1] or spread.roller_gap + 2 * spread.roller_radius > heap_box[5]:
+        _fail("sweep.roller.gap_um", value,
+              f"puts the roller or its feed outside the simulation box of the heap settled at "
+              f"roller.gap_um = {gap!r} (the spread starts from its restart): sweep gaps closer to it")
 
 
 def _check_variant(config: dict, values: dict, base_dir: Path, key: str, shown) -> None:
@@ -448,15 +453,39 @@ EXECUTION_KEYS = ("mpi_ranks", "runtime_min", "mem_mb_per_rank", "checkpoints_pe
 SIMULATION_SECTIONS = ("random_seed", "material", "psd", "roller", "substrate", "rest_rms_speed_mm_s", "timestep")
 
 
-def simulation_fingerprint(config: dict, level: str, sections=SIMULATION_SECTIONS) -> str:
+def simulation_fingerprint(config: dict, level: str, sections=SIMULATION_SECTIONS,
+                           base_dir: str | Path = ".") -> str:
     """A short hash of everything in ``config`` that a simulation of ``level``
     computes with (``sections`` and the level's fidelity keys but
-    EXECUTION_KEYS). The workflow passes it as a rule parameter, so that
+    EXECUTION_KEYS), a user's ``substrate.mesh`` (relative to ``base_dir``) by its content.
+    The workflow passes it as a rule parameter, so that
     Snakemake re-runs the simulations when the physics changes (and not when
     only the MPI ranks or the cluster limits do)."""
     relevant = {key: config.get(key) for key in sections}
     relevant["fidelity"] = {k: v for k, v in config["fidelity"][level].items() if k not in EXECUTION_KEYS}
+    mesh = config["substrate"]["mesh"] if "substrate" in sections else None
+    if mesh is not None:
+        relevant["substrate_mesh_sha256"] = file_digest(Path(base_dir) / mesh)
     return hashlib.sha256(json.dumps(relevant, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 of a file's content (cached by path, size and modification time); '' if it is missing."""
+    path = Path(path).resolve()
+    try:
+        stat = path.stat()
+    except OSError:
+        return ""
+    return _digest(path, stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _digest(path: Path, size: int, mtime_ns: int) -> str:
+    sha = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            sha.update(block)
+    return sha.hexdigest()
 
 
 def run_name(U: float, omega: float, replicate: int) -> str:
@@ -604,6 +633,97 @@ def run_parameters(config: dict, run: Run) -> dict:
 def runs_by_name(config: dict) -> dict[str, Run]:
     """:func:`sweep_runs` by folder name (``Run.name``)."""
     return {run.name: run for run in sweep_runs(config)}
+
+
+_AXIS_FOLDER = re.compile(r"([A-Za-z_][A-Za-z0-9_.]*)=([^/]+)")
+_RUN_FOLDER = re.compile(r"U([^_/]+)_w([^_/]+)_r(\d+)")
+
+
+def find_run(config: dict, name: str, table: dict | None = None, base_dir: str | Path = ".") -> Run:
+    """The run of folder ``name`` (its path under ``runs/``): the sweep's (``table``, default
+    :func:`runs_by_name`), or a point outside the sweep named by its folder, e.g.
+    ``U100_w-7_r0`` or ``roller.gap_um=350/U70_w-5_r1``: its speeds, replicate and the extra axes'
+    values, each checked as a swept one is (the axes not named take the config's own values).
+
+    Raises :class:`ConfigError` naming the folder and what is wrong with it, in one line."""
+    table = runs_by_name(config) if table is None else table
+    if name in table:
+        return table[name]
+    *folders, leaf = name.split("/")
+    match = _RUN_FOLDER.fullmatch(leaf)
+    if not match:
+        raise ConfigError(f"run folder {name!r}: not a run's folder name, U<mm/s>_w<rad/s>_r<replicate> "
+                          "(e.g. U70_w-5_r0), after a folder <axis>=<value>/ for each extra sweep axis")
+    U, omega = (_folder_number(name, key, text) for key, text in (("U_mm_s", match[1]), ("omega_rad_s", match[2])))
+    values = _folder_values(config, name, folders, SPEED_AXES)
+    trial = copy.deepcopy(config)
+    trial["sweep"] = {"U_mm_s": [U], "omega_rad_s": [omega], "replicates": int(match[3]) + 1,
+                      **{axis: [value] for axis, value in values.items()}}
+    try:
+        check_finite(trial["sweep"], "sweep")
+        validate_schema(trial)
+        if values:
+            _check_variant(config, values, Path(base_dir), "sweep", values)
+        if "roller.gap_um" in values:
+            check_swept_gap(config, values["roller.gap_um"])
+        check_speeds(trial)
+    except ConfigError as err:
+        raise ConfigError(f"run folder {name!r}: {err}") from None
+    return _named(config, name, Run(U, omega, int(match[3]), tuple(values.items()), _own(config)), "name")
+
+
+def find_heap(config: dict, name: str, table: dict | None = None) -> Run:
+    """The first run of heap folder ``name`` (``r0``, ``psd.mean_diameter_um=150/r1``): the sweep's
+    (``table``, default :func:`heaps_by_name`), or a heap outside it named by its folder (a new
+    replicate, or values of the axes the heap depends on). Raises :class:`ConfigError` naming it."""
+    table = heaps_by_name(config) if table is None else table
+    if name in table:
+        return table[name]
+    *folders, leaf = name.split("/")
+    if not re.fullmatch(r"r\d+", leaf):
+        raise ConfigError(f"heap folder {name!r}: not a heap's folder name, r<replicate> (e.g. r0), after a "
+                          "folder <axis>=<value>/ for each extra sweep axis the heap depends on")
+    values = _folder_values(config, name, folders, (*SPEED_AXES, *SPREAD_ONLY_AXES))
+    if values:
+        try:
+            _check_variant(config, values, Path("."), "sweep", values)
+        except ConfigError as err:
+            raise ConfigError(f"heap folder {name!r}: {err}") from None
+    first = sweep_runs(config)[0]
+    return _named(config, name, Run(first.U, first.omega, int(leaf[1:]), tuple(values.items()), _own(config)),
+                  "heap")
+
+
+def _own(config: dict) -> tuple:
+    return tuple((a, config_value(config, a)) for a in sweep_axes(config))
+
+
+def _named(config: dict, name: str, run: Run, attribute: str) -> Run:
+    """``run`` if its folder is spelt ``name``; else a ConfigError giving its spelling."""
+    if getattr(run, attribute) != name:
+        raise ConfigError(f"{'run' if attribute == 'name' else 'heap'} folder {name!r}: its point's folder is "
+                          f"{getattr(run, attribute)!r} (numbers as :g writes them, the sweep's axes in order)")
+    return run
+
+
+def _folder_number(name: str, key: str, text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ConfigError(f"folder {name!r}: {key} = {text!r} is not a number") from None
+
+
+def _folder_values(config: dict, name: str, folders: list, excluded) -> dict:
+    """The extra axes' values named by the ``<axis>=<value>`` folders of ``name``, in sweep order."""
+    axes = [a for a in sweep_axes(config) if a not in excluded]
+    values = {}
+    for folder in folders:
+        match = _AXIS_FOLDER.fullmatch(folder)
+        if not match or match[1] not in axes:
+            raise ConfigError(f"folder {name!r}: {folder!r} does not name an axis of the sweep as <axis>=<value> "
+                              f"(its axes here: {', '.join(axes) or 'none'})")
+        values[match[1]] = _folder_number(name, match[1], match[2])
+    return {a: values[a] for a in axes if a in values}
 
 
 def heaps_by_name(config: dict) -> dict[str, Run]:

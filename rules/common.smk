@@ -2,6 +2,8 @@
 from analysis.metrics.deposit import profile_runs as deposit_profile_runs
 from analysis.config import (
     ConfigError,
+    find_heap,
+    find_run,
     heap_config,
     heaps_by_name,
     load_config,
@@ -50,6 +52,27 @@ TOP_VIEWS = [f"{OUT}/top_views/{FIRST_RUNS[(_U_MAX, w, 0)]}.png" for w in _OMEGA
 
 # The heap folder each run starts from.
 HEAP_OF = {name: run.heap for name, run in RUN_TABLE.items()}
+
+
+def run_of(name):
+    """The run of a folder under runs/: the sweep's, or a point outside it asked for by its path
+    (results/<level>/runs/U100_w-7_r0/metrics.json), checked as a swept point; else one line."""
+    try:
+        return find_run(CONFIG, name, RUN_TABLE, workflow.basedir)
+    except ConfigError as err:
+        raise WorkflowError(str(err)) from None
+
+
+def heap_of(name):
+    """The first run of a heap folder (the sweep's, or one outside it asked for by its path)."""
+    try:
+        return find_heap(CONFIG, name, HEAP_TABLE)
+    except ConfigError as err:
+        raise WorkflowError(str(err)) from None
+
+
+# A user's substrate mesh is an input of the geometry (its content is in the fingerprints too).
+USER_MESH = [str(Path(workflow.basedir) / CONFIG["substrate"]["mesh"])] if CONFIG["substrate"]["mesh"] else []
 
 
 wildcard_constraints:

@@ -4,6 +4,7 @@ import copy
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import yaml
 
@@ -46,8 +47,9 @@ def test_whole_number_floats_are_refused_where_integers_are_wanted(dotted, value
 
 
 def test_a_swept_integer_key_stays_an_integer():
-    config = load_config(with_values(level="smoke", sweep__U_mm_s=[40, 70], sweep__omega_rad_s=[-5, 0, 5], surrogate__n_test=2,
-                                     **{"sweep__fidelity.smoke.heap_particles": [400, 500]}), base_dir=ROOT)
+    config = load_config(with_values(level="smoke", sweep__U_mm_s=[40, 70], sweep__omega_rad_s=[-5, 0, 5],
+                                     surrogate__n_test=2, **{"sweep__fidelity.smoke.heap_particles": [400, 500]}),
+                         base_dir=ROOT)
     assert len(sweep_runs(config)) == 12
 
 
@@ -125,3 +127,96 @@ def test_snakemake_names_a_broken_config_argument_and_the_config_file(tmp_path):
     (tmp_path / "b" / "config.yaml").write_text("level: smoke\nsweep:\n  U_mm_s: [40, 70\n  replicates: 1\n")
     out = dry_run(workdir=tmp_path / "b")
     assert "config.yaml: YAML syntax error at line 4, column 13" in out and "Traceback" not in out
+
+
+# ------------------------------------------------------------------ a user's substrate mesh
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    """The smoke level's generated substrate (it covers the bed exactly) and the config that made it."""
+    from analysis.dem.simulate import make_geometry
+    folder = tmp_path_factory.mktemp("generated")
+    config = load_config(with_values(level="smoke"), base_dir=ROOT)
+    make_geometry(config, "smoke", folder)
+    return folder / "substrate.stl"
+
+
+def geometry_with(mesh, out):
+    from analysis.dem.simulate import make_geometry
+    config = with_values(level="smoke", substrate__mesh=str(mesh))
+    return make_geometry(load_config(config, base_dir=ROOT), "smoke", out)
+
+
+@pytest.mark.parametrize("fmt", ["binary.stl", "ply", "obj"])
+def test_a_mesh_that_exactly_covers_the_bed_passes_float32_rounding(generated, tmp_path, fmt):
+    import trimesh
+    mesh = trimesh.load_mesh(str(generated), process=False)
+    path = tmp_path / f"mine.{fmt}"
+    path.write_bytes(trimesh.exchange.export.export_mesh(mesh, None, file_type=fmt.split(".")[-1]) if fmt != "obj"
+                     else trimesh.exchange.obj.export_obj(mesh).encode())
+    summary = geometry_with(path, tmp_path / "out")
+    assert summary["substrate_triangles"] == len(mesh.faces)
+
+
+@pytest.mark.parametrize("case, words", [
+    ("empty", "holds no triangles"), ("random", "holds no triangles"), ("truncated", "holds no triangles"),
+    ("nan_vertex", "1 vertices that are not finite numbers"), ("millimetres", "in millimetres or micrometres?"),
+    ("heights_in_mm", "more than the simulation box is high"),
+])
+def test_a_bad_mesh_is_refused_in_one_line_naming_the_file(generated, tmp_path, case, words):
+    import os
+
+    import trimesh
+    mesh = trimesh.load_mesh(str(generated), process=False)
+    path = tmp_path / "mine.stl"
+    text = generated.read_bytes()
+    if case == "empty":
+        path.write_bytes(b"")
+    elif case == "random":
+        path.write_bytes(os.urandom(4000))
+    elif case == "truncated":
+        path.write_bytes(text[: len(text) // 2])
+    else:
+        if case == "nan_vertex":
+            mesh.vertices[mesh.faces[7, 1], 2] = np.nan
+        elif case == "millimetres":
+            mesh.vertices *= 1e3
+        else:
+            mesh.vertices[:, 2] *= 1e3
+        path.write_text(trimesh.exchange.stl.export_stl_ascii(mesh))
+    with pytest.raises(ConfigError) as err:
+        geometry_with(path, tmp_path / "out")
+    message = str(err.value)
+    assert "substrate.mesh" in message and str(path) in message and words in message, message
+    assert "\n" not in message and not (tmp_path / "out").exists()
+
+
+def test_a_meshs_content_is_in_the_fingerprint(generated, tmp_path):
+    from analysis.config import simulation_fingerprint
+    mesh = tmp_path / "mine.stl"
+    mesh.write_bytes(generated.read_bytes())
+    config = load_config(with_values(level="smoke", substrate__mesh="mine.stl"), base_dir=tmp_path)
+    before = simulation_fingerprint(config, "smoke", base_dir=tmp_path)
+    mesh.write_bytes(generated.read_bytes().replace(b"solid", b"solid edited", 1))
+    assert simulation_fingerprint(config, "smoke", base_dir=tmp_path) != before
+    assert simulation_fingerprint(config, "smoke", sections=("roller",), base_dir=tmp_path) == \
+        simulation_fingerprint(config, "smoke", sections=("roller",))
+
+
+def test_simulate_settle_with_missing_meshes_is_refused_by_name(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "analysis.dem.simulate", "settle", "--config", str(ROOT / "config.yaml"),
+                          "--level", "smoke", "--meshes", str(tmp_path / "nonexistent"), "--out", str(tmp_path / "s")],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 1 and res.stdout == ""
+    assert res.stderr == f"spreadmap-simulate: error: {tmp_path / 'nonexistent' / 'substrate.stl'}: No such file or " \
+                         "directory (the geometry step's substrate: --meshes)\n"
+    assert not (tmp_path / "s").exists()
+
+
+def test_simulate_spread_with_a_nan_speed_is_refused():
+    res = subprocess.run([sys.executable, "-m", "analysis.dem.simulate", "spread", "--config", str(ROOT / "config.yaml"),
+                          "--level", "smoke", "--meshes", "m", "--settled", "s", "--U", "nan", "--omega", "0",
+                          "--out", "never"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "U = nan mm/s" in res.stderr
+    assert not (ROOT / "never").exists()

@@ -139,13 +139,18 @@ def load_surface(path: str | Path) -> trimesh.Trimesh:
     Only its triangles are kept (a profilometer scan exported as a triangulated
     surface); quads are split in two. An STL is read by trimesh (meshio 5.3
     misreads some ASCII STLs). Raises ``ValueError`` naming the file if it
-    cannot be read or holds no triangle or quad.
+    cannot be read (empty, truncated, not a mesh), holds no triangle or quad, or has a
+    vertex that is not a finite number.
     """
     if Path(path).suffix.lower() == ".stl":
         try:
-            return load_stl(path)
+            mesh = load_stl(path)
         except Exception as err:
             raise ValueError(f"cannot read the surface mesh {str(path)!r}: {err}") from None
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            raise ValueError(f"the surface mesh {str(path)!r} holds no triangles (an empty, truncated or "
+                             "unreadable STL)")
+        return _finite(mesh, path)
     try:
         mesh = meshio.read(str(path))
     except Exception as err:  # meshio raises its own ReadError, and OS and format errors
@@ -156,4 +161,14 @@ def load_surface(path: str | Path) -> trimesh.Trimesh:
     if not faces:
         raise ValueError(f"the surface mesh {str(path)!r} holds no triangles or quads "
                          f"(cells: {', '.join(b.type for b in mesh.cells) or 'none'})")
-    return trimesh.Trimesh(np.asarray(mesh.points, float)[:, :3], np.concatenate(faces), process=False)
+    return _finite(trimesh.Trimesh(np.asarray(mesh.points, float)[:, :3], np.concatenate(faces), process=False), path)
+
+
+def _finite(mesh: trimesh.Trimesh, path) -> trimesh.Trimesh:
+    """``mesh`` if every vertex of its triangles is finite; else a ValueError naming the file and one vertex."""
+    used = mesh.vertices[np.unique(mesh.faces)]
+    bad = ~np.isfinite(used).all(axis=1)
+    if bad.any():
+        raise ValueError(f"the surface mesh {str(path)!r} has {bad.sum()} vertices that are not finite numbers "
+                         f"(e.g. {used[bad][0].tolist()})")
+    return mesh

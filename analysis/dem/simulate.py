@@ -13,8 +13,10 @@ Command line (the workflow's rules call the same functions)::
 from __future__ import annotations
 
 import argparse
+import errno
 import hashlib
 import json
+import math
 import os
 import shutil
 import sys
@@ -23,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.config import PEAK_CAP, ConfigError, Scene, load_config, scene
+from analysis.config import MAX_RUN_STEPS, PEAK_CAP, ConfigError, Scene, load_config, scene
 from analysis.dem import geometry
 from analysis.dem.health import (
     MAX_STRAYS,
@@ -80,7 +82,9 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
             raise ConfigError(f"config key 'substrate.mesh': {err}") from None
         lo, hi = substrate.bounds
         need = (s.substrate_x[0], s.substrate_x[1], 0.0, s.strip_width)
-        if lo[0] > need[0] or hi[0] < need[1] or lo[1] > 1e-9 or hi[1] < s.strip_width - 1e-9:
+        _check_units(substrate, s)
+        if lo[0] > need[0] + COVER_TOL or hi[0] < need[1] - COVER_TOL or lo[1] > COVER_TOL or \
+                hi[1] < s.strip_width - COVER_TOL:
             raise ConfigError(f"config key 'substrate.mesh' = {s.substrate['mesh']!r}: "
                               f"covers x {lo[0]:.4g}..{hi[0]:.4g} m,"
                               f" y {lo[1]:.4g}..{hi[1]:.4g} m; the bed needs x {need[0]:.4g}..{need[1]:.4g},"
@@ -114,6 +118,37 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
             "substrate_peak_m": float(peak), "substrate_triangles": len(substrate.faces)}
 
 
+#: How far [m] a user's mesh may fall short of the bed's edges: float32 rounding (binary STL,
+#: PLY) moves them by nanometres.
+COVER_TOL = 1e-7
+
+#: A user's mesh whose extent or height span is this many times the bed's is in the wrong units.
+UNITS_FACTOR = 30
+
+
+def _check_units(substrate, s: Scene) -> None:
+    """A ConfigError if the user's mesh looks like millimetres or micrometres, not metres: its extent
+    far beyond the bed's, or its heights spanning more than the bed's box is high."""
+    extent = substrate.bounds[1] - substrate.bounds[0]
+    bed = np.array([s.substrate_x[1] - s.substrate_x[0], s.strip_width])
+    ratio = float(np.max(extent[:2] / bed))
+    height = s.box[5] - s.box[4]
+    if ratio > UNITS_FACTOR or extent[2] > height:
+        what = (f"spans {extent[0]:.4g} x {extent[1]:.4g} m, {ratio:.0f} x the bed's {bed[0]:.4g} x {bed[1]:.4g} m"
+                if ratio > UNITS_FACTOR else
+                f"has heights spanning {extent[2]:.4g} m, more than the simulation box is high ({height:.4g} m)")
+        raise ConfigError(f"config key 'substrate.mesh' = {s.substrate['mesh']!r}: {what}: in millimetres or "
+                          "micrometres? the mesh must be in metres")
+
+
+def need_files(*files) -> None:
+    """Raise FileNotFoundError (``<file>: No such file or directory (<what>)``) for the first of
+    ``(path, what)`` that is not a file: before LIGGGHTS, which would end in an MPI_ABORT."""
+    for path, what in files:
+        if not Path(path).is_file():
+            raise FileNotFoundError(errno.ENOENT, f"No such file or directory ({what})", str(path))
+
+
 def _publish(out: Path, summary: dict, *names: str) -> None:
     """Rename the run's ``<name>.part`` files to ``<name>``, then write
     ``health.json``: a run killed or refused earlier leaves nothing that looks finished."""
@@ -130,6 +165,7 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     ``max_steps`` cuts each settling phase to that many steps: a start-up check
     of a big scene (benchmarks/bench_scaling.py), not a settled heap."""
     s, out, meshes = scene(config, level), Path(outdir), Path(meshes).resolve()
+    need_files((meshes / "substrate.stl", "the geometry step's substrate: --meshes"))
     out.mkdir(parents=True, exist_ok=True)
     if s.timestep > s.max_rayleigh_fraction * s.rayleigh_time:
         raise LiggghtsError(f"time step {s.timestep:.3g} s exceeds the allowed fraction of the Rayleigh time")
@@ -227,9 +263,14 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     """
     s, out = scene(config, level), Path(outdir)
     meshes, settled = Path(meshes).resolve(), Path(settled).resolve()
+    if not (math.isfinite(U_mm_s) and U_mm_s > 0 and math.isfinite(omega_rad_s)):
+        raise ConfigError(f"spreader speeds U = {U_mm_s} mm/s, omega = {omega_rad_s} rad/s: U must be a positive "
+                          "finite number, omega a finite one")
+    need_files((meshes / "substrate.stl", "the geometry step's substrate: --meshes"),
+               (meshes / "roller_shell.stl", "the geometry step's roller: --meshes"),
+               (settled / "settled.restart", "the settled heap: --settled"),
+               (settled / "settled.dump", "the settled heap: --settled"))
     out.mkdir(parents=True, exist_ok=True)
-    if U_mm_s <= 0:
-        raise ConfigError(f"spreader speed U = {U_mm_s} mm/s must be positive")
     speed = U_mm_s * 1e-3
     peak = float(geometry.load_stl(meshes / "substrate.stl").vertices[:, 2].max())
     if peak >= s.roller_gap:  # a swept gap spreads over the substrate made under roller.gap_um
@@ -241,6 +282,9 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
         raise LiggghtsError(f"roller start x = {x0:.4g} m puts the roller outside the box (x >= {s.box[0]:.4g} m)")
     travel_time = (s.travel_end - x0) / speed
     travel_steps = ceil(travel_time / s.timestep)
+    if not 1 <= travel_steps <= MAX_RUN_STEPS:
+        raise ConfigError(f"spreader speed U = {U_mm_s:g} mm/s: the travel takes {travel_steps:.3g} time steps of "
+                          f"{s.timestep:.3g} s; a LIGGGHTS run takes 1 to {MAX_RUN_STEPS}")
     unknown = set(skips) - SKIPS
     if unknown:
         raise ValueError(f"unknown skip(s) {sorted(unknown)}; known: {sorted(SKIPS)}")
