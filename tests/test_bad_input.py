@@ -220,3 +220,38 @@ def test_simulate_spread_with_a_nan_speed_is_refused():
                           "--out", "never"], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "U = nan mm/s" in res.stderr
     assert not (ROOT / "never").exists()
+
+
+# ------------------------------------------------------------------ the workflow
+
+
+def snakemake(workdir, *args):
+    proc = subprocess.run([sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-d", str(workdir),
+                           "--configfile", str(ROOT / "config.yaml"), str(ROOT / ".test/config.yaml"), *args],
+                          capture_output=True, text=True, cwd=ROOT, timeout=600)
+    return proc.returncode, proc.stdout + proc.stderr
+
+
+def test_a_run_outside_the_sweep_asked_for_by_its_path_runs_or_is_refused_in_one_line(tmp_path):
+    code, out = snakemake(tmp_path, "-n", "--cores", "1", "results/smoke/runs/U100_w-7_r0/metrics.json")
+    assert code == 0 and "spread" in out and "KeyError" not in out, out
+    code, out = snakemake(tmp_path, "-n", "--cores", "1", "results/smoke/runs/U1e+12_w-7_r0/metrics.json")
+    assert code != 0 and "KeyError" not in out
+    assert "run folder 'U1e+12_w-7_r0': config key 'sweep.U_mm_s.0': 1000000000000.0 is greater than the maximum " \
+           "of 2000" in out, out
+    assert not (tmp_path / "results").exists()
+
+
+def test_editing_a_user_mesh_reruns_its_geometry(generated, tmp_path):
+    mesh = tmp_path / "scan.stl"
+    mesh.write_bytes(generated.read_bytes())
+    target = "results/smoke/meshes/r0/geometry.json"
+    mine = ["--config", f"substrate={{mesh: {mesh}}}"]
+    code, out = snakemake(tmp_path / "w", "--cores", "1", *mine, "--", target)
+    assert code == 0, out
+    code, out = snakemake(tmp_path / "w", "-n", "--cores", "1", *mine, "--", target)
+    assert code == 0 and "Nothing to be done" in out, out
+    text = mesh.read_text()
+    mesh.write_text(text.replace("vertex ", "vertex  ", 1))   # the same shape: the content changed, not the physics
+    code, out = snakemake(tmp_path / "w", "-n", "--cores", "1", *mine, "--", target)
+    assert code == 0 and "geometry" in out and "Nothing to be done" not in out, out
