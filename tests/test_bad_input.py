@@ -255,3 +255,56 @@ def test_editing_a_user_mesh_reruns_its_geometry(generated, tmp_path):
     mesh.write_text(text.replace("vertex ", "vertex  ", 1))   # the same shape: the content changed, not the physics
     code, out = snakemake(tmp_path / "w", "-n", "--cores", "1", *mine, "--", target)
     assert code == 0 and "geometry" in out and "Nothing to be done" not in out, out
+
+
+# ------------------------------------------------------------------ LIGGGHTS' failures
+
+
+def fake_liggghts(tmp_path, monkeypatch, body: str):
+    """A stand-in ``liggghts`` (a shell script) for the run wrapper, and a one-line input for it."""
+    import analysis.dem.liggghts as lg
+    exe = tmp_path / "liggghts"
+    exe.write_text(f"#!/bin/sh\n{body}\n")
+    exe.chmod(0o755)
+    monkeypatch.setattr(lg, "LIGGGHTS", str(exe))
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "in.txt").write_text('print "hello"\n')
+    return tmp_path / "run" / "in.txt"
+
+
+@pytest.mark.parametrize("body, words", [
+    ("kill -9 $$", "was killed by SIGKILL (signal 9, e.g. the out-of-memory killer, a time limit or kill -9)"),
+    ("echo 'ERROR: Mesh (id roller): 12 mesh elements have been lost / left the domain. (fix_mesh.cpp:91)'; exit 1",
+     "the roller mesh left the simulation box (its facets outside were deleted): check roller.diameter_mm"),
+    ("echo 'ERROR: Invalid run command N value (run.cpp:69)'; exit 1", "a run command out of range"),
+    ("echo 'ERROR: Cannot open restart file ../settle/r0/settled.restart (read_restart.cpp:98)'; exit 1",
+     "LIGGGHTS cannot open ../settle/r0/settled.restart"),
+])
+def test_a_foreseen_liggghts_failure_is_one_line_naming_what_to_change(tmp_path, monkeypatch, body, words):
+    from analysis.dem.liggghts import LiggghtsError, run
+    script = fake_liggghts(tmp_path, monkeypatch, body)
+    with pytest.raises(LiggghtsError) as err:
+        run(script, script.with_name("log.txt"))
+    message = str(err.value)
+    assert words in message and message.endswith(f"run folder: {script.parent}") and "\n" not in message, message
+
+
+def test_a_full_disk_is_reported_as_a_full_disk(tmp_path, monkeypatch):
+    import errno
+    import shutil as sh
+
+    import analysis.dem.liggghts as lg
+    script = fake_liggghts(tmp_path, monkeypatch, "exit 0")
+    monkeypatch.setattr(lg.shutil, "disk_usage", lambda path: sh._ntuple_diskusage(10**9, 10**9 - 4096, 4096))
+    with pytest.raises(OSError) as err:
+        lg.run(script, script.with_name("log.txt"))
+    assert err.value.errno == errno.ENOSPC and err.value.filename == str(script.parent)
+
+
+def test_a_liggghts_that_exits_0_without_running_is_refused(generated, tmp_path, monkeypatch):
+    from analysis.dem.liggghts import LiggghtsError
+    from analysis.dem.simulate import settle
+    fake_liggghts(tmp_path, monkeypatch, "exit 0")
+    with pytest.raises(LiggghtsError, match="exited 0 without running a time step"):
+        settle(load_config(with_values(level="smoke"), base_dir=ROOT), "smoke", generated.parent, tmp_path / "s")
+    assert not (tmp_path / "s" / "health.json").exists()

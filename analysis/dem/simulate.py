@@ -141,6 +141,14 @@ def _check_units(substrate, s: Scene) -> None:
                           "micrometres? the mesh must be in metres")
 
 
+def ran(log: dict, input_file: Path) -> dict:
+    """``log`` if LIGGGHTS ran time steps (printed thermo rows); else a LiggghtsError naming the run folder."""
+    if log["thermo"].empty or "KinEng" not in log["thermo"]:
+        raise LiggghtsError(f"LIGGGHTS on {input_file.name} exited 0 without running a time step (no thermo "
+                            f"output in its log); run folder: {input_file.parent}")
+    return log
+
+
 def need_files(*files) -> None:
     """Raise FileNotFoundError (``<file>: No such file or directory (<what>)``) for the first of
     ``(path, what)`` that is not a file: before LIGGGHTS, which would end in an MPI_ABORT."""
@@ -179,7 +187,7 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
                   restart="settled.restart.part", dump="settled.dump.part",
                   stray_x=s.sampling_region[0] - max(s.diameters), max_strays=MAX_STRAYS)
     (out / "settle.in").write_text(text)
-    log = run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks)
+    log = ran(run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks), out / "settle.in")
     _check_timestep(log, s)
     peak = check_kinetic_energy(log, squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
     if log["inserted"] != s.heap_particles:
@@ -334,7 +342,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
             (out / CHECKPOINT_DIR / "input.sha256").write_text(fingerprint)
         (out / "spread.in").write_text(fresh if restart is None else render_from(step, restart))
         try:
-            log = run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks)
+            log = ran(run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks), out / "spread.in")
             break
         except LiggghtsError as err:
             if restart is None:
