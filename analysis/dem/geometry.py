@@ -164,6 +164,23 @@ def load_surface(path: str | Path) -> trimesh.Trimesh:
     return _finite(trimesh.Trimesh(np.asarray(mesh.points, float)[:, :3], np.concatenate(faces), process=False), path)
 
 
+#: A mesh whose extent is this many times what it should cover, or whose heights span more than
+#: the box is high, is in the wrong units (mm or um for m: 1000 x, 1e6 x).
+UNITS_FACTOR = 30
+
+
+def units_slip(mesh: trimesh.Trimesh, extent, height: float) -> str | None:
+    """What says that ``mesh`` is not in metres: its x-y extent over ``UNITS_FACTOR`` x ``extent``
+    (x, y [m], what it covers) or its heights spanning more than ``height`` [m]; None if nothing."""
+    span = mesh.bounds[1] - mesh.bounds[0]
+    ratio = float(np.max(span[:2] / np.asarray(extent, float)))
+    if ratio > UNITS_FACTOR:
+        return f"spans {span[0]:.4g} x {span[1]:.4g} m, {ratio:.0f} x the {extent[0]:.4g} x {extent[1]:.4g} m it covers"
+    if span[2] > height:
+        return f"has heights spanning {span[2]:.4g} m, more than the {height:.4g} m box is high"
+    return None
+
+
 def _finite(mesh: trimesh.Trimesh, path) -> trimesh.Trimesh:
     """``mesh`` if every vertex of its triangles is finite; else a ValueError naming the file and one vertex."""
     used = mesh.vertices[np.unique(mesh.faces)]

@@ -122,22 +122,12 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
 #: PLY) moves them by nanometres.
 COVER_TOL = 1e-7
 
-#: A user's mesh whose extent or height span is this many times the bed's is in the wrong units.
-UNITS_FACTOR = 30
-
-
 def _check_units(substrate, s: Scene) -> None:
-    """A ConfigError if the user's mesh looks like millimetres or micrometres, not metres: its extent
-    far beyond the bed's, or its heights spanning more than the bed's box is high."""
-    extent = substrate.bounds[1] - substrate.bounds[0]
-    bed = np.array([s.substrate_x[1] - s.substrate_x[0], s.strip_width])
-    ratio = float(np.max(extent[:2] / bed))
-    height = s.box[5] - s.box[4]
-    if ratio > UNITS_FACTOR or extent[2] > height:
-        what = (f"spans {extent[0]:.4g} x {extent[1]:.4g} m, {ratio:.0f} x the bed's {bed[0]:.4g} x {bed[1]:.4g} m"
-                if ratio > UNITS_FACTOR else
-                f"has heights spanning {extent[2]:.4g} m, more than the simulation box is high ({height:.4g} m)")
-        raise ConfigError(f"config key 'substrate.mesh' = {s.substrate['mesh']!r}: {what}: in millimetres or "
+    """A ConfigError if the user's mesh looks like millimetres or micrometres, not metres
+    (:func:`geometry.units_slip` against the bed and the simulation box)."""
+    slip = geometry.units_slip(substrate, (s.substrate_x[1] - s.substrate_x[0], s.strip_width), s.box[5] - s.box[4])
+    if slip:
+        raise ConfigError(f"config key 'substrate.mesh' = {s.substrate['mesh']!r}: {slip}: in millimetres or "
                           "micrometres? the mesh must be in metres")
 
 
