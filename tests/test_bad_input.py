@@ -378,3 +378,34 @@ def test_recommend_refuses_a_repeated_fix_and_a_grid_past_memory(tmp_path, capsy
         main(["--max-porosity", "30", "--model", str(tmp_path / "model.joblib"), *argv])
     err = capsys.readouterr().err
     assert exit_.value.code == 2 and err.count("\n") == 1 and words in err, err
+
+
+# ------------------------------------------------------------------ what the workflow writes
+
+
+def test_dataset_records_which_runs_were_resumed(tmp_path):
+    import json
+
+    import pandas as pd
+
+    from analysis.metrics.dataset import build_dataset
+    from tests.test_sweep import _synthetic_runs
+    files = _synthetic_runs(tmp_path, with_gap=False)
+    for i, path in enumerate(files["health"]):
+        health = json.loads(path.read_text())
+        path.write_text(json.dumps({**health, "resumed_from_step": 4000 if i == 2 else 0}))
+    build_dataset(files["metrics"], files["health"], files["bench"], tmp_path / "dataset.csv")
+    df = pd.read_csv(tmp_path / "dataset.csv")
+    assert sorted(df["resumed_from_step"]) == [0] * 8 + [4000]
+
+
+def test_a_grid_with_unbounded_intervals_comes_with_a_warning():
+    import pandas as pd
+
+    from analysis.surrogate.intervals import unbounded_warning
+    grid = pd.DataFrame({"U_mm_s": [40.0, 70.0], "mass_g": [1.0, 2.0], "mass_g_lo": [-np.inf, -np.inf],
+                         "mass_g_hi": [np.inf, np.inf]})
+    assert unbounded_warning(grid, 6, 0.9) == (
+        "warning: 2 interval columns of the grid are infinite (mass_g_lo, mass_g_hi): 90 % intervals need at least "
+        "9 calibration runs, the model has 6; add sweep points or replicates, or lower surrogate.confidence")
+    assert unbounded_warning(grid.drop(columns=["mass_g_lo", "mass_g_hi"]), 6, 0.9) is None

@@ -55,7 +55,7 @@ def point_label(point: dict) -> str:
 HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller",
           "atoms", "lost", "through_substrate", "through_roller", "max_overlap_fraction", "peak_speed_m_s",
           "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction",
-          "roller_travel_m", "cpu_s"]
+          "roller_travel_m", "cpu_s", "resumed_from_step"]
 
 
 class UnsoundRunError(ValueError):
