@@ -232,9 +232,8 @@ def snakemake(workdir, *args):
     return proc.returncode, proc.stdout + proc.stderr
 
 
-def test_a_run_outside_the_sweep_asked_for_by_its_path_runs_or_is_refused_in_one_line(tmp_path):
-    code, out = snakemake(tmp_path, "-n", "--cores", "1", "results/smoke/runs/U100_w-7_r0/metrics.json")
-    assert code == 0 and "spread" in out and "KeyError" not in out, out
+def test_a_run_outside_the_sweep_asked_for_by_its_path_is_checked_as_a_swept_point(tmp_path):
+    """(One that passes the checks runs: test_the_slurm_benchmarks_commands_resolve_without_a_cluster.)"""
     code, out = snakemake(tmp_path, "-n", "--cores", "1", "results/smoke/runs/U1e+12_w-7_r0/metrics.json")
     assert code != 0 and "KeyError" not in out
     assert "run folder 'U1e+12_w-7_r0': config key 'sweep.U_mm_s.0': 1000000000000.0 is greater than the maximum " \
@@ -409,3 +408,17 @@ def test_a_grid_with_unbounded_intervals_comes_with_a_warning():
         "warning: 2 interval columns of the grid are infinite (mass_g_lo, mass_g_hi): 90 % intervals need at least "
         "9 calibration runs, the model has 6; add sweep points or replicates, or lower surrogate.confidence")
     assert unbounded_warning(grid.drop(columns=["mass_g_lo", "mass_g_hi"]), 6, 0.9) is None
+
+
+def test_the_slurm_benchmarks_commands_resolve_without_a_cluster(monkeypatch, capsys):
+    """benchmarks/bench_slurm.py --dry-run: its phases' Snakemake commands, the time-limited spread
+    outside the sweep among them, resolve (the full run on a cluster: make bench-slurm)."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import bench_slurm
+    with pytest.raises(SystemExit) as exit_:
+        bench_slurm.main(["--limit-point", "fast"])
+    assert exit_.value.code == 2 and "--limit-point 'fast': give U:omega" in capsys.readouterr().err
+    assert bench_slurm.main(["--dry-run"]) == 0
+    assert capsys.readouterr().out.splitlines() == [
+        "2. workflow through profiles/slurm: resolves", "3. time-limited spread: resolves",
+        "5. local reference: resolves"]
