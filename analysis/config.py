@@ -73,11 +73,13 @@ def coerce_cli_values(value, key: str = ""):
     if isinstance(value, list):
         return [coerce_cli_values(v, key) for v in value]
     if isinstance(value, str):
-        return parse_yaml(value, f"--config {key}={value}") if value.strip() else value
+        return parse_yaml(value, f"--config {key}={value}".replace("\n", "\\n")) if value.strip() else value
     return value
 
 
+@functools.cache
 def load_schema() -> dict:
+    """The config's JSON Schema (read once; not to be changed in place)."""
     return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
@@ -144,9 +146,14 @@ _Validator = jsonschema.validators.extend(
         "integer", lambda _, value: isinstance(value, int) and not isinstance(value, bool)))
 
 
+@functools.cache
+def _validator():
+    return _Validator(load_schema())
+
+
 def validate_schema(config: dict) -> None:
     """Raise :class:`ConfigError` on the first schema violation, naming key and value."""
-    validator = _Validator(load_schema())
+    validator = _validator()
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
     if errors:
         error = errors[0]
