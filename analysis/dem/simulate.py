@@ -163,10 +163,10 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     ``max_steps`` cuts each settling phase to that many steps: a start-up check
     of a big scene (benchmarks/bench_scaling.py), not a settled heap."""
     s, out, meshes = scene(config, level), Path(outdir), Path(meshes).resolve()
-    need_files((meshes / "substrate.stl", "the geometry step's substrate: --meshes"))
-    out.mkdir(parents=True, exist_ok=True)
     if s.timestep > s.max_rayleigh_fraction * s.rayleigh_time:
         raise LiggghtsError(f"time step {s.timestep:.3g} s exceeds the allowed fraction of the Rayleigh time")
+    need_files((meshes / "substrate.stl", "the geometry step's substrate: --meshes"))
+    out.mkdir(parents=True, exist_ok=True)
     text = render("settle.in.j2", s=s, contact=contact_model(s), seeds=seeds(config, s, replicate),
                   box=[f"{v:.6g}" for v in s.box],
                   processors=processors_grid(s),
