@@ -679,7 +679,7 @@ def find_run(config: dict, name: str, table: dict | None = None, base_dir: str |
     return _named(config, name, Run(U, omega, int(match[3]), tuple(values.items()), _own(config)), "name")
 
 
-def find_heap(config: dict, name: str, table: dict | None = None) -> Run:
+def find_heap(config: dict, name: str, table: dict | None = None, base_dir: str | Path = ".") -> Run:
     """The first run of heap folder ``name`` (``r0``, ``psd.mean_diameter_um=150/r1``): the sweep's
     (``table``, default :func:`heaps_by_name`), or a heap outside it named by its folder (a new
     replicate, or values of the axes the heap depends on). Raises :class:`ConfigError` naming it."""
@@ -693,7 +693,7 @@ def find_heap(config: dict, name: str, table: dict | None = None) -> Run:
     values = _folder_values(config, name, folders, (*SPEED_AXES, *SPREAD_ONLY_AXES))
     if values:
         try:
-            _check_variant(config, values, Path("."), "sweep", values)
+            _check_variant(config, values, Path(base_dir), "sweep", values)
         except ConfigError as err:
             raise ConfigError(f"heap folder {name!r}: {err}") from None
     first = sweep_runs(config)[0]

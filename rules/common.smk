@@ -66,7 +66,7 @@ def run_of(name):
 def heap_of(name):
     """The first run of a heap folder (the sweep's, or one outside it asked for by its path)."""
     try:
-        return find_heap(CONFIG, name, HEAP_TABLE)
+        return find_heap(CONFIG, name, HEAP_TABLE, workflow.basedir)
     except ConfigError as err:
         raise WorkflowError(str(err)) from None
 
