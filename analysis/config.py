@@ -623,7 +623,7 @@ def heap_config(config: dict, run: Run) -> dict:
     return resolve(config, run.heap_values)
 
 
-def run_parameters(config: dict, run: Run) -> dict:
+def run_parameters(config: dict, run: Run, base_dir: str | Path = ".") -> dict:
     """Everything a run computes with, resolved (its extra axes' values in place), JSON/YAML-ready:
     ``run`` (folder), ``U_mm_s``, ``omega_rad_s``, ``replicate``, ``swept`` (the extra axes'
     values), ``heap`` (its settle's folder), ``level``, ``physics`` (the fingerprint Snakemake re-runs
@@ -632,7 +632,7 @@ def run_parameters(config: dict, run: Run) -> dict:
     resolved, level = run_config(config, run), config["level"]
     return {"run": run.name, "U_mm_s": run.U, "omega_rad_s": run.omega, "replicate": run.replicate,
             "swept": dict(run.values), "heap": run.heap, "level": level,
-            "physics": simulation_fingerprint(resolved, level),
+            "physics": simulation_fingerprint(resolved, level, base_dir=base_dir),
             "config": {**{k: resolved[k] for k in (*SIMULATION_SECTIONS, "profilometer")},
                        "fidelity": {level: resolved["fidelity"][level]}}}
 
