@@ -1,5 +1,6 @@
 # Shared by every rule file: the checked configuration, the fidelity level and the runs.
 from analysis.metrics.deposit import profile_runs as deposit_profile_runs
+from analysis.rule import by_folder
 from analysis.config import (
     ConfigError,
     find_heap,
@@ -54,21 +55,11 @@ TOP_VIEWS = [f"{OUT}/top_views/{FIRST_RUNS[(_U_MAX, w, 0)]}.png" for w in _OMEGA
 HEAP_OF = {name: run.heap for name, run in RUN_TABLE.items()}
 
 
-def run_of(name):
-    """The run of a folder under runs/: the sweep's, or a point outside it asked for by its path
-    (results/<level>/runs/U100_w-7_r0/metrics.json), checked as a swept point; else one line."""
-    try:
-        return find_run(CONFIG, name, RUN_TABLE, workflow.basedir)
-    except ConfigError as err:
-        raise WorkflowError(str(err)) from None
-
-
-def heap_of(name):
-    """The first run of a heap folder (the sweep's, or one outside it asked for by its path)."""
-    try:
-        return find_heap(CONFIG, name, HEAP_TABLE, workflow.basedir)
-    except ConfigError as err:
-        raise WorkflowError(str(err)) from None
+# The run of a folder under runs/ (and the first run of a heap folder): the sweep's, or a point
+# outside it asked for by its path (results/<level>/runs/U100_w-7_r0/metrics.json), checked as a
+# swept point; else one line naming the folder.
+run_of = by_folder(find_run, CONFIG, RUN_TABLE, workflow.basedir)
+heap_of = by_folder(find_heap, CONFIG, HEAP_TABLE, workflow.basedir)
 
 
 # A user's substrate mesh is an input of the geometry (its content is in the fingerprints too).
