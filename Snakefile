@@ -1,5 +1,6 @@
 # spreadmap: DEM spreading simulations (LIGGGHTS) -> layer metrics -> surrogate -> process maps.
 # The method is the paper's spreading process maps (Figures 6-10); see README.md.
+import time
 from pathlib import Path
 
 from snakemake.utils import min_version
@@ -52,6 +53,17 @@ localrules:
     maps,
     top_view,
     run_parameters,
+
+
+STARTED = time.time()
+
+
+onsuccess:
+    # one line on what the spreads cost (runs, CPU, particle-steps/s, wall time)
+    from analysis.metrics.dataset import workflow_summary
+
+    if Path(f"{OUT}/dataset.csv").is_file():
+        print(workflow_summary(f"{OUT}/dataset.csv", time.time() - STARTED))
 
 
 rule all:

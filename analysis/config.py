@@ -22,7 +22,14 @@ import jsonschema
 import numpy as np
 import yaml
 
-from analysis.physics import INSERTION_SOLID_FRACTION, feed_length, number_mean_volume, psd_classes, rayleigh_time
+from analysis.physics import (
+    INSERTION_SOLID_FRACTION,
+    feed_length,
+    number_mean_volume,
+    polygon_bottom_range,
+    psd_classes,
+    rayleigh_time,
+)
 
 #: The project folder: config.yaml, templates/, Snakefile (the package is installed in place).
 PROJECT_DIR = Path(__file__).resolve().parents[1]
@@ -237,7 +244,7 @@ def check_physics(config: dict, base_dir: Path = Path(".")) -> None:
                       f"{err} mg/mm at material.density_kg_m3 = {config['material']['density_kg_m3']!r}, "
                       f"roller.diameter_mm = {config['roller']['diameter_mm']!r} and "
                       f"roller.gap_um = {config['roller']['gap_um']!r}")
-        if lvl["sampling_start_mm"] < lvl["heap_length_mm"]:
+        if lvl["sampling_start_mm"] < lvl.get("heap_start_mm", 0) + lvl["heap_length_mm"]:
             _fail(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
                   f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")
     check_bounds(config)
@@ -626,12 +633,18 @@ def heap_config(config: dict, run: Run) -> dict:
 def run_parameters(config: dict, run: Run, base_dir: str | Path = ".") -> dict:
     """Everything a run computes with, resolved (its extra axes' values in place), JSON/YAML-ready:
     ``run`` (folder), ``U_mm_s``, ``omega_rad_s``, ``replicate``, ``swept`` (the extra axes'
-    values), ``heap`` (its settle's folder), ``level``, ``physics`` (the fingerprint Snakemake re-runs
-    on), and ``config``: the sections of :data:`SIMULATION_SECTIONS`, ``profilometer`` and the level's
-    ``fidelity`` keys."""
+    values), ``heap`` (its settle's folder), ``level``, ``roller_gap`` (the gap as built, um),
+    ``physics`` (the fingerprint Snakemake re-runs on), and ``config``: the sections of
+    :data:`SIMULATION_SECTIONS`, ``profilometer`` and the level's ``fidelity`` keys."""
     resolved, level = run_config(config, run), config["level"]
+    roller = resolved["roller"]
+    near, far = polygon_bottom_range(roller["diameter_mm"] / 2, roller["facets_around"])
+    radius_mm, gap_um, mm_to_um = roller["diameter_mm"] / 2, roller["gap_um"], 1e3
+    gap = {"datum": "the substrate's mean plane under the sampling region", "mean_over_a_turn_um": gap_um,
+           "still_roller_um": gap_um, "min_um": gap_um - (far - radius_mm) * mm_to_um,
+           "max_um": gap_um + (radius_mm - near) * mm_to_um}
     return {"run": run.name, "U_mm_s": run.U, "omega_rad_s": run.omega, "replicate": run.replicate,
-            "swept": dict(run.values), "heap": run.heap, "level": level,
+            "swept": dict(run.values), "heap": run.heap, "level": level, "roller_gap": gap,
             "physics": simulation_fingerprint(resolved, level, base_dir=base_dir),
             "config": {**{k: resolved[k] for k in (*SIMULATION_SECTIONS, "profilometer")},
                        "fidelity": {level: resolved["fidelity"][level]}}}
@@ -799,6 +812,7 @@ def scene(config: dict, level: str | None = None) -> Scene:
                                        lvl["size_classes"])
     width = lvl["strip_width_mm"] * mm
     heap_length = lvl["heap_length_mm"] * mm
+    heap_start = lvl.get("heap_start_mm", 0.0) * mm
     mean_volume = number_mean_volume(diameters, fractions)
     heap_height = lvl["heap_particles"] * mean_volume / (INSERTION_SOLID_FRACTION * width * heap_length)
     gap = roller["gap_um"] * um
@@ -816,13 +830,13 @@ def scene(config: dict, level: str | None = None) -> Scene:
         feed_len = 0.0 if pile is None else feed_length(feed_pile_mass / width, mat["density_kg_m3"], radius, gap)
     except ValueError as err:
         _fail(f"fidelity.{level}.feed_pile_mg_per_mm", pile, str(err))
-    box = (-(2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
+    box = (heap_start - (2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
            sample_x1 + lvl["run_out_mm"] * mm + max(radius, feed_len) + 2 * mm,
            0.0, width,
            -max(gap, 6 * sub["sq_um"] * um) - 0.2 * mm, gap + 2 * radius + 5 * mm)
     return Scene(
         level=level, strip_width=width,
-        heap=(0.0, heap_length, gap, gap + heap_height), heap_particles=lvl["heap_particles"],
+        heap=(heap_start, heap_start + heap_length, gap, gap + heap_height), heap_particles=lvl["heap_particles"],
         sampling_region=(sample_x0, sample_x1, y0, y0 + sample_w),
         travel_end=sample_x1 + lvl["run_out_mm"] * mm,
         roller_radius=radius, roller_gap=gap, roller_facets=roller["facets_around"],

@@ -104,3 +104,22 @@ def feed_length(pile_per_width: float, density: float, radius: float, gap: float
         raise ValueError(f"a pile of {pile_per_width * 1e3:.4g} mg/mm does not fit twice in the wedge ahead of the "
                          f"roller (at most {wedge[-1] * density * PILE_SOLID_FRACTION / FEED_ZONE_ROOM * 1e3:.3g})")
     return float(np.interp(need, wedge, x))
+
+
+def polygon_circumradius(radius: float, facets: int) -> float:
+    """Circumradius [m] of the ``facets``-gon whose bottom, averaged over a turn, is ``radius``
+    below its axis.
+
+    A polygon turning about its axis lowers its bottom from ``Rc cos(pi/n)`` (a flat facet
+    down) to ``Rc`` (a vertex down); the mean over a turn is ``Rc sin(pi/n) / (pi/n)``, so a
+    circumradius ``radius (pi/n) / sin(pi/n)`` keeps the roller's mean gap where it is set.
+    """
+    half = pi / facets
+    return radius * half / np.sin(half)
+
+
+def polygon_bottom_range(radius: float, facets: int) -> tuple[float, float]:
+    """(nearest, farthest) [m] of the bottom of :func:`polygon_circumradius`'s polygon below
+    its axis over a turn: a flat facet down, a vertex down."""
+    rc = polygon_circumradius(radius, facets)
+    return float(rc * np.cos(pi / facets)), float(rc)

@@ -6,6 +6,7 @@ import yaml
 from analysis.config import ConfigError, load_config, scene
 from analysis.dem import geometry
 from analysis.dem.simulate import make_geometry
+from analysis.physics import polygon_circumradius
 from tests.test_config import ROOT
 
 
@@ -71,7 +72,53 @@ def test_roller_shell_has_no_end_caps(config, meshes):
     shell = geometry.load_stl(out / "roller_shell.stl")
     assert not shell.is_watertight
     assert np.allclose(np.abs(shell.face_normals[:, 1]), 0, atol=1e-9)
-    assert np.allclose(np.hypot(shell.vertices[:, 0], shell.vertices[:, 2]), 0.015)
+    assert np.allclose(np.hypot(shell.vertices[:, 0], shell.vertices[:, 2]),
+                       polygon_circumradius(0.015, config["roller"]["facets_around"]))
+
+
+def _bottom_depth_over_a_turn(mesh, turns=7200):
+    """The lowest point's depth below the axis at each of ``turns`` angles of a turn, from the
+    vertices alone (a polygon's lowest point is a vertex)."""
+    angle = np.linspace(0.0, 2 * np.pi, turns, endpoint=False)
+    x, z = mesh.vertices[:, 0], mesh.vertices[:, 2]
+    # the mesh turned by `angle` about y: a vertex at (x, z) goes to z' = z cos a - x sin a
+    return np.max(-(z[None, :] * np.cos(angle)[:, None] - x[None, :] * np.sin(angle)[:, None]), axis=1)
+
+
+@pytest.mark.parametrize("facets", [12, 90])
+def test_roller_polygon_keeps_the_mean_gap_over_a_turn_and_at_rest(facets):
+    """A polygon's bottom swings between its inradius and circumradius as it turns; the roller's
+    polygon is sized so that the bottom's mean over a turn is the roller's radius, and built turned
+    so that a still roller's bottom is there too (the gap as set, whatever omega)."""
+    R = 0.015
+    shell = geometry.roller(2 * R, 0.001, facets, capped=False)
+    depth = _bottom_depth_over_a_turn(shell)
+    assert depth.mean() == pytest.approx(R, rel=1e-6)
+    assert depth[0] == pytest.approx(R, rel=1e-9)                        # as built: the still roller
+    half = np.pi / facets                                                 # the swing, by hand
+    rc = R * half / np.sin(half)
+    assert depth.max() == pytest.approx(rc, rel=1e-5)                    # (sampled angles: within 1e-5)
+    assert depth.min() == pytest.approx(rc * np.cos(half), rel=1e-4)
+
+
+def test_gap_is_set_from_the_sampling_regions_mean_plane(config):
+    """Over a tilted bed (z = a + b x) the region's mean plane is not the field's: the roller's
+    axis stands gap + R above the mean height under the sampling region, a + b x_mid."""
+    from analysis.dem.simulate import roller_gap
+    s = scene(config, "smoke")
+    a, b = 20e-6, 4e-3
+    x = np.linspace(s.box[0], s.box[1], 401)
+    y = np.linspace(0.0, s.strip_width, 5)
+    bed = geometry.height_field_mesh(x, y, a + b * np.repeat(x[:, None], len(y), axis=1))
+    shell = geometry.roller(2 * s.roller_radius, s.strip_width, s.roller_facets, capped=False)
+    gap = roller_gap(s, bed, shell)
+    x_mid = np.mean(s.sampling_region[:2])
+    field_mean = a + b * np.mean(s.box[:2])
+    assert abs(field_mean - (a + b * x_mid)) > 2e-6                     # the two datums differ here
+    assert gap["substrate_mean_region_m"] == pytest.approx(a + b * x_mid, abs=0.5e-6)
+    assert gap["axis_z_m"] == pytest.approx(a + b * x_mid + s.roller_gap + s.roller_radius, abs=0.5e-6)
+    assert gap["effective_gap_um"] == pytest.approx(s.roller_gap * 1e6, abs=0.01)
+    assert gap["gap_min_um"] < gap["effective_gap_um"] < gap["gap_max_um"]
 
 
 def test_users_stl_replaces_the_generated_substrate(config, tmp_path):

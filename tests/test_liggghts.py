@@ -7,6 +7,7 @@ import sys
 import time
 
 import numpy as np
+import pandas as pd
 import pytest
 from conftest import SMOKE_SEED_SD
 from scipy.spatial import cKDTree
@@ -16,7 +17,13 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 from analysis.config import scene
 from analysis.dem.drop import drop_sphere, first_bounce, free_fall_time
 from analysis.dem.health import substrate_height
-from analysis.dem.inputs import checkpoint_plan, feed_plan, processors_grid, travel_segments
+from analysis.dem.inputs import (
+    FEED_BEHIND_FRONT_DIAMETERS,
+    checkpoint_plan,
+    feed_plan,
+    processors_grid,
+    travel_segments,
+)
 from analysis.dem.liggghts import LiggghtsError, check_seeds, input_path, read_log, run
 from analysis.dem.simulate import make_geometry, settle, spread
 from analysis.metrics.dump import read_dump
@@ -106,15 +113,45 @@ def test_spread_lays_powder_past_the_heap_and_loses_nothing(smoke):
     assert layer.z.max() < s.roller_gap + 0.1e-3
 
 
-def test_feed_holds_the_pile_ahead_of_the_roller(smoke):
-    """Forward rolling (omega = -5 rad/s at 100 mm/s) lays more than the smoke heap: the feed
-    tops the pile up, and when the roller stops the powder ahead of it weighs what the level's
-    feed_pile_mg_per_mm says (5 mg/mm x 1 mm), within the last top-up's dip and what the pile
-    pushed ahead of the feed zone."""
+def test_feed_tops_the_pile_up_from_above_and_never_ahead_of_its_front(smoke):
+    """The feed places new particles only behind the pile's front (measured by LIGGGHTS at each
+    top-up), so none lands on bare bed ahead of the pile: read back from the top-ups' printed fronts
+    and insertion bounds in the log, and from where each fed particle (tagged by its id) was at the
+    next top-up (feed_landings.csv)."""
+    h, s, run_dir = smoke["spread"], smoke["scene"], smoke["root"] / "run"
+    assert h["fed_particles"] > 0 and not h["heap_exhausted"]
+    printed = read_log((run_dir / "spread.log").read_text())["printed"]
+    steps = sorted(int(k.rsplit("_", 1)[1]) for k in printed if k.startswith("feed_front_"))
+    assert len(steps) == h["feed_topups"] > 5
+    margin = FEED_BEHIND_FRONT_DIAMETERS * max(s.diameters)
+    for step in steps:                           # every insertion zone ends behind its front
+        assert printed[f"feed_x1_{step}"] <= printed[f"feed_front_{step}"] - margin + 1e-12
+    landed = pd.read_csv(run_dir / "feed_landings.csv")
+    assert len(landed) == h["fed_particles"] and landed["id"].is_unique
+    assert landed["id"].min() > read_dump(smoke["root"] / "settle" / "settled.dump").atoms["id"].max()
+    # within the travel since the top-up, no fed particle got more than a largest diameter ahead of the front
+    assert landed["ahead_of_front_m"].max() < max(s.diameters)
+    assert h["fed_max_ahead_of_front_mm"] == pytest.approx(landed["ahead_of_front_m"].max() * 1e3)
+    assert 0 <= h["fed_share_of_region_layer"] < 1
+
+
+def test_inrun_overlaps_and_squeeze_outs_are_in_the_health(smoke):
+    """The largest overlaps during the run (sampled at every thermo line) are in health.json, and
+    bound the final state's: the final dump's largest particle-particle overlap, computed here from
+    its positions, is at most the in-run maximum (the last thermo line is that state)."""
     h, s = smoke["spread"], smoke["scene"]
-    assert h["fed_particles"] > 0.2 * s.heap_particles
-    assert h["mass_ahead_of_roller_kg"] == pytest.approx(s.feed_pile_mass, rel=0.25)
-    assert not h["heap_exhausted"]
+    for key in ("inrun_max_overlap_um", "inrun_max_wall_overlap_um", "squeeze_outs_max", "squeeze_out_samples"):
+        assert key in h and np.isfinite(h[key]), key
+    atoms = read_dump(smoke["root"] / "run" / "final.dump").atoms
+    xyz, r = atoms[["x", "y", "z"]].to_numpy(), atoms["radius"].to_numpy()
+    pairs = cKDTree(xyz).query_pairs(2 * r.max(), output_type="ndarray")
+    overlap = (r[pairs].sum(1) - np.linalg.norm(xyz[pairs[:, 0]] - xyz[pairs[:, 1]], axis=1)).max() * 1e6
+    assert 0 < overlap <= h["inrun_max_overlap_um"] + 1e-3
+    assert h["inrun_max_overlap_fraction"] == pytest.approx(h["inrun_max_overlap_um"] * 1e-6 / (min(s.diameters) / 2))
+    assert h["inrun_max_wall_overlap_um"] > 0                   # the bed rests on the substrate
+    thermo = read_log((smoke["root"] / "run" / "spread.log").read_text())["thermo"]
+    assert h["squeeze_outs_max"] == thermo["squeezed"].max()
+    assert h["squeeze_out_samples"] == (thermo["squeezed"] > 0).sum()
 
 
 def test_time_step_is_the_configured_fraction_of_the_rayleigh_time(smoke, config):

@@ -119,3 +119,18 @@ def test_a_blown_up_settle_fails_loudly_and_publishes_nothing(config, tmp_path):
         settle(unstable, "smoke", tmp_path / "meshes", tmp_path / "settle")
     published = {p.name for p in (tmp_path / "settle").iterdir()}
     assert not published & {"settled.restart", "settled.dump", "health.json"}
+
+
+def test_squeeze_threshold_is_three_wall_speeds_or_a_fall_from_the_feed_zone():
+    from analysis.dem.health import SQUEEZE_FACTOR, squeeze_threshold
+    assert squeeze_threshold(0.4, 0.0) == pytest.approx(SQUEEZE_FACTOR * 0.4)
+    assert squeeze_threshold(0.04, 4e-3) == pytest.approx(np.sqrt(2 * 9.81 * 4e-3))   # 0.28 m/s > 0.12
+
+
+def test_workflow_summary_counts_every_integrated_particle_step():
+    """Two runs: 100 + 300 CPU s, 2e8 + 4e8 particle-steps -> 1.5 M particle-steps per CPU second."""
+    from analysis.metrics.dataset import workflow_summary
+    table = pd.DataFrame({"cpu_s": [100.0, 300.0], "particle_steps": [2e8, 4e8]})
+    line = workflow_summary(table, wall_s=600.0)
+    assert line == ("spreadmap: 2 runs, LIGGGHTS CPU 6.7 min (200 s a run), 1.50 M particle-steps per CPU second, "
+                    "workflow wall time 10.0 min")

@@ -17,6 +17,8 @@ def test_reversed_dataset_disagrees(dataset):
     assert verdicts["M_s jumps when omega turns negative (multi-layer deposition)"] == "no"
     assert verdicts["Q_s grows monotonically with U"] == "no"
     assert verdicts["Phi increases monotonically with U at constant omega"] == "no"
+    assert verdicts["Phi jumps up when omega turns negative"] == "no"
+    assert verdicts["M_s rises as omega falls from positive to zero"] == "no"
 
 
 def test_every_statement_against_hand_computed_values():
@@ -49,3 +51,36 @@ def test_every_statement_against_hand_computed_values():
     rows = {paper: agrees for paper, _, agrees in trend_table(small, 15.0)}
     assert rows["M_s jumps when omega turns negative (multi-layer deposition)"] == "no"
     assert rows["Q_s grows monotonically with U"] == "partly"
+
+
+def test_the_rest_of_section_3_against_hand_computed_values():
+    """Two speeds x omega -10..10: M_s falls with omega over omega >= 0 at U 40 only (50 %: partly),
+    peaks inside the negative range at both U (at -5), Q_s peaks at the range's end at U 100; layers
+    from thickness / 175 um; Phi 10 points higher at omega < 0."""
+    import pandas as pd
+    omega = [-10, -5, 0, 5, 10]
+    data = pd.DataFrame({
+        "U_mm_s": [40] * 5 + [100] * 5, "omega_rad_s": omega * 2,
+        "mass_g": [3, 4, 2, 1.5, 1] + [3, 4, 2, 1, 1.5],
+        "throughput_mm2_s": [30, 40, 20, 15, 10] + [50, 40, 20, 15, 10],
+        "roughness_um": [90] * 10,
+        "thickness_um": [350, 525, 350, 175, 175] * 2,       # 2, 3, 2, 1, 1 layers
+        "porosity_pct": [60, 60, 55, 50, 50] * 2})
+    rows = {paper: (measured, agrees) for paper, measured, agrees in trend_table(data, 15.0, 175.0)}
+    assert rows["M_s rises as omega falls from positive to zero"] == (
+        "falling in omega over omega >= 0 at 50% of the U", "partly")
+    assert rows["Q_s rises as omega falls from positive to zero"] == (
+        "falling in omega over omega >= 0 at 100% of the U", "yes")
+    assert rows["M_s first rises then falls as negative omega grows in magnitude"] == (
+        "largest between omega = 0 and -10 rad/s at omega = -5, -5 (U = 40, 100): inside the range at 100% of the U",
+        "yes")
+    assert rows["Q_s first rises then falls as negative omega grows in magnitude"][1] == "partly"
+    # layers: omega = 0: 2.00; omega < 0: (2 + 3) / 2 = 2.50; omega > 0: 1.00
+    assert rows["omega = 0 and omega < 0 lay 2-3 layers, omega > 0 a single one"] == (
+        "deposit thickness over the mean diameter: 2.00 at omega = 0, 2.50 at omega < 0, 1.00 at omega > 0", "yes")
+    assert rows["Phi jumps up when omega turns negative"] == (
+        "mean Phi at omega < 0: 60.0 %, at omega > 0: 50.0 %", "yes")
+    thin = data.assign(thickness_um=[175.0] * 10, porosity_pct=[50, 50, 55, 60, 60] * 2)
+    rows = {paper: agrees for paper, _, agrees in trend_table(thin, 15.0, 175.0)}
+    assert rows["omega = 0 and omega < 0 lay 2-3 layers, omega > 0 a single one"] == "no"
+    assert rows["Phi jumps up when omega turns negative"] == "no"

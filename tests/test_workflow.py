@@ -42,7 +42,25 @@ def workflow(tmp_path_factory):
     workdir.mkdir(parents=True)
     proc = subprocess.run(snakemake_cmd(workdir, FIRST_U), capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
+    (workdir / "snakemake.out").write_text(proc.stdout + proc.stderr)
     return workdir
+
+
+def test_the_workflow_ends_on_one_line_of_what_the_spreads_cost(workflow):
+    """runs, LIGGGHTS' CPU time, particle-steps per CPU second (every particle integrated) and wall time,
+    the numbers those of dataset.csv."""
+    data = pd.read_csv(workflow / "results/smoke/dataset.csv")
+    found = re.search(r"^spreadmap: (\d+) runs, LIGGGHTS CPU ([\d.]+) min \(\d+ s a run\), ([\d.]+) M particle-steps "
+                      r"per CPU second, workflow wall time ([\d.]+) min$", (workflow / "snakemake.out").read_text(),
+                      re.MULTILINE)
+    assert found, "no summary line"
+    runs, cpu_min, rate, wall_min = found.groups()
+    assert int(runs) == len(data)
+    assert float(cpu_min) == pytest.approx(data.cpu_s.sum() / 60, abs=0.06)
+    assert float(rate) == pytest.approx(data.particle_steps.sum() / data.cpu_s.sum() / 1e6, abs=0.006)
+    assert 0 < float(wall_min) * 60 >= data.cpu_s.max() / 2
+    # counted over every particle integrated: more than the particles left in the final layer
+    assert np.all(data.particle_steps > data.atoms * (data.steps - data.resumed_from_step))
 
 
 def test_dataset_has_one_sane_row_per_run(workflow):

@@ -12,6 +12,7 @@ import numpy as np
 import trimesh
 
 from analysis.io import write_bytes
+from analysis.physics import polygon_circumradius
 
 
 def gaussian_random_field(nx: int, ny: int, spacing: float, correlation_length: float,
@@ -105,22 +106,40 @@ def substrate_rms(mesh: trimesh.Trimesh, x_range: tuple | None = None) -> tuple[
 
 
 def roller(diameter: float, length: float, facets: int, capped: bool = True) -> trimesh.Trimesh:
-    """A cylinder of ``diameter`` and ``length`` [m], axis along y from y=0 to y=length,
-    centred on x = z = 0, normals outward.
+    """The roller: a ``facets``-gon prism of mean diameter ``diameter`` and ``length`` [m],
+    axis along y from y=0 to y=length, centred on x = z = 0, normals outward.
+
+    Its circumradius is :func:`analysis.physics.polygon_circumradius` (the bottom's mean over a turn is
+    ``diameter / 2`` below the axis), and it is turned so that its bottom is at that mean
+    as built: a still roller (omega = 0) sees the gap as set, a turning one swings about it
+    by :func:`analysis.physics.polygon_bottom_range`.
 
     ``capped=False`` gives the lateral surface alone: in a periodic strip the
     roller is endless, and end caps on the periodic boundary would be walls.
     """
-    cylinder = trimesh.creation.cylinder(radius=diameter / 2, height=length, sections=facets)
+    rc = polygon_circumradius(diameter / 2, facets)
+    cylinder = trimesh.creation.cylinder(radius=rc, height=length, sections=facets)
     cylinder.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))  # z -> y
+    # the vertex nearest the bottom (-z) at the angle whose depth is the mean one
+    rim = cylinder.vertices[np.isclose(np.hypot(cylinder.vertices[:, 0], cylinder.vertices[:, 2]), rc)]
+    depth = -rim[:, 2]
+    nearest = rim[np.argmax(depth)]
+    now = np.arctan2(nearest[0], -nearest[2])  # its angle from straight down, about +y towards +x
+    want = np.arccos(np.clip(diameter / 2 / rc, -1.0, 1.0))
+    cylinder.apply_transform(trimesh.transformations.rotation_matrix(now - want, [0, 1, 0]))
     cylinder.apply_translation([0.0, length / 2, 0.0])
     if capped:
         cylinder.fix_normals()
         return cylinder
     radial = np.hypot(cylinder.vertices[:, 0], cylinder.vertices[:, 2])
-    lateral = np.all(np.isclose(radial[cylinder.faces], diameter / 2), axis=1)
+    lateral = np.all(np.isclose(radial[cylinder.faces], rc), axis=1)
     shell = cylinder.submesh([np.flatnonzero(lateral)], append=True)
     return shell
+
+
+def roller_bottom_depth(mesh: trimesh.Trimesh) -> float:
+    """Depth [m] of a roller mesh's lowest point below its axis (z = 0), as built."""
+    return float(-mesh.vertices[:, 2].min())
 
 
 def write_stl(mesh: trimesh.Trimesh, path: str | Path) -> Path:

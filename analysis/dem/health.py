@@ -10,12 +10,14 @@ from math import pi, sqrt
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from scipy.interpolate import RegularGridInterpolator
 from scipy.spatial import cKDTree
 
 from analysis.config import Scene
 from analysis.dem import geometry
 from analysis.dem.liggghts import LiggghtsError
+from analysis.metrics.dump import read_dump
 from analysis.metrics.profilometer import substrate_height as grid_height
 
 #: A particle counts as "through the substrate" when its centre is this many
@@ -155,6 +157,76 @@ def check_kinetic_energy(log: dict, wall_speed: float = 0.0, squeeze_speed: floa
                             f"{BLOWUP_SPEED_FACTOR} x the fastest wall's {wall_speed:.3g} m/s, squeeze-out "
                             f"{squeeze_speed:.3g} m/s)): lower the time step")
     return {"peak_speed_m_s": float(vmax.max(initial=0.0))}
+
+
+#: A squeeze-out: a particle faster than this many times the roller's fastest surface speed
+#: (U + |omega| R), and than a fall from the top of the feed zone (``squeeze_threshold``).
+SQUEEZE_FACTOR = 3.0
+
+
+def squeeze_threshold(wall_speed: float, fall_height: float) -> float:
+    """Speed [m/s] above which a particle counts as squeezed out of the nip:
+    :data:`SQUEEZE_FACTOR` x ``wall_speed`` [m/s], and at least the speed of a free fall
+    from ``fall_height`` [m] (a fed particle landing on the pile is no squeeze-out)."""
+    return max(SQUEEZE_FACTOR * wall_speed, sqrt(2 * 9.81 * max(fall_height, 0.0)))
+
+
+def inrun_health(log: dict, s: Scene) -> dict:
+    """Overlaps and squeeze-outs during the run, from the thermo lines (every
+    ``THERMO_EVERY`` steps) of ``spread.in.j2``: the largest particle-particle and
+    particle-wall (substrate or roller) overlap [um] and as a fraction of the smallest
+    particle's radius, the most squeeze-outs in one sample and the samples with any."""
+    thermo, r_min = log["thermo"], min(s.diameters) / 2
+    if "ovpp" not in thermo:
+        return {}
+    pp = float(np.nanmax(thermo["ovpp"].to_numpy(), initial=0.0))
+    wall = float(np.nanmax(thermo["ovwall"].to_numpy(), initial=0.0))
+    squeezed = thermo["squeezed"].to_numpy()
+    return {"inrun_max_overlap_um": pp * 1e6, "inrun_max_overlap_fraction": pp / r_min,
+            "inrun_max_wall_overlap_um": wall * 1e6, "inrun_max_wall_overlap_fraction": wall / r_min,
+            "squeeze_outs_max": int(np.nanmax(squeezed, initial=0)),
+            "squeeze_out_samples": int(np.sum(squeezed > 0))}
+
+
+def feed_landings(folder: Path, printed: dict, roller_x, timestep: float, landed_at: dict) -> pd.DataFrame:
+    """Where each fed particle landed: one row per particle of the top-up dumps
+    ``folder/landed.<step>.dump`` (written by ``spread.in.j2`` at the next top-up or the
+    travel's end, step ``landed_at[step]``).
+
+    ``roller_x(step)`` is the roller axis' x [m] at a step. Columns: ``id``, ``topup_step``,
+    ``x_landed_m``, ``radius_m``, ``front_m`` (the pile's front measured at the top-up),
+    ``ahead_of_front_m`` (landed x less that front carried on by the roller's travel since)
+    and ``ahead_of_roller_m`` (landed x less the roller axis' x when it was written down)."""
+    rows = []
+    for path in sorted(Path(folder).glob("landed.*.dump"), key=lambda p: int(p.name.split(".")[1])):
+        step = int(path.name.split(".")[1])
+        atoms = read_dump(path).atoms
+        end = landed_at[step]
+        front = printed[f"feed_front_{step}"]
+        rows.append(pd.DataFrame({
+            "id": atoms["id"].to_numpy(), "topup_step": step, "x_landed_m": atoms["x"].to_numpy(),
+            "radius_m": atoms["radius"].to_numpy(), "front_m": front,
+            "ahead_of_front_m": atoms["x"].to_numpy() - (front + roller_x(end) - roller_x(step)),
+            "ahead_of_roller_m": atoms["x"].to_numpy() - roller_x(end)}))
+    columns = ["id", "topup_step", "x_landed_m", "radius_m", "front_m", "ahead_of_front_m", "ahead_of_roller_m"]
+    return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=columns)
+
+
+def feed_health(landings: pd.DataFrame, atoms, first_fed_id: int, region: tuple) -> dict:
+    """What the feed did to the measured layer: the farthest any fed particle landed ahead
+    of the pile's front [mm], the share of the final layer in the sampling ``region``
+    (x0, x1, y0, y1 [m]) that was fed (ids from ``first_fed_id``), and how far ahead of the
+    roller those fed particles had landed (median and largest, mm)."""
+    x0, x1, y0, y1 = region
+    xyz = atoms[["x", "y"]].to_numpy()
+    inside = (xyz[:, 0] >= x0) & (xyz[:, 0] <= x1) & (xyz[:, 1] >= y0) & (xyz[:, 1] <= y1)
+    fed = inside & (atoms["id"].to_numpy() >= first_fed_id)
+    in_layer = landings[landings["id"].isin(atoms["id"].to_numpy()[fed])]
+    ahead = in_layer["ahead_of_roller_m"].to_numpy() * 1e3
+    return {"fed_max_ahead_of_front_mm": float(landings["ahead_of_front_m"].max() * 1e3) if len(landings) else 0.0,
+            "fed_share_of_region_layer": float(fed.sum() / max(inside.sum(), 1)),
+            "fed_in_region_landed_ahead_of_roller_mm_median": float(np.median(ahead)) if len(ahead) else 0.0,
+            "fed_in_region_landed_ahead_of_roller_mm_max": float(ahead.max()) if len(ahead) else 0.0}
 
 
 def through_roller(atoms, axis_x: float, axis_z: float, radius: float) -> int:

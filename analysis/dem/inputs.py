@@ -111,15 +111,37 @@ def feed_plan(s: Scene, x0: float, speed: float, travel_steps: int, heap_toe: fl
     return list(range(first, travel_steps, every))
 
 
-def feed_zone(s: Scene, x_axis: float, floor: float) -> dict:
-    """The feed zone [m] when the roller axis is at ``x_axis``: a block from the axis
-    to ``s.feed_length`` ahead, from ``floor`` (above the substrate's highest point)
-    to the roller's height there, less a cylinder of the roller's radius plus the
-    largest particle's (nothing is inserted into the roller or the substrate)."""
+#: The pile's front is where it is at least this many mean diameters deep: single
+#: particles rolled ahead on the bed are not the pile.
+PILE_FRONT_DEPTH_DIAMETERS = 1.0
+
+
+#: Fed particles are placed at least this many largest diameters behind the pile's front.
+FEED_BEHIND_FRONT_DIAMETERS = 1.0
+
+
+def feed_zone(s: Scene, x_axis: float, floor: float, axis_z: float) -> dict:
+    """The feed zone [m] when the roller axis is at ``x_axis`` (height ``axis_z``).
+
+    ``pile``: the wedge between the bed (from ``floor``, above the substrate's highest
+    point) and the roller, from its axis to ``s.feed_length`` ahead: the pile is the powder
+    there. ``body``: its part at least :data:`PILE_FRONT_DEPTH_DIAMETERS` mean diameters
+    above the floor; the pile's front is the farthest particle in it, measured by LIGGGHTS at
+    each top-up. New particles are placed at rest in free places of the wedge from the axis
+    to :data:`FEED_BEHIND_FRONT_DIAMETERS` largest diameters behind that front (``margin``),
+    clear of the roller (a cylinder of its radius plus the largest particle's), so they land
+    on the pile, never on bare bed ahead of it; ``x1`` bounds the front from above."""
     r = s.roller_radius
-    top = s.roller_gap + r - sqrt(r**2 - s.feed_length**2)
+    top = axis_z - sqrt(r**2 - s.feed_length**2)
+    d_max = max(s.diameters)
+    clear = r + d_max / 2
+    # the zone reaches at least where a largest particle fits under the roller (insert/pack
+    # needs a region with room in it), however short the pile
+    room = sqrt(max(clear**2 - (axis_z - floor - d_max) ** 2, 0.0))
     return {"x0": x_axis, "x1": x_axis + s.feed_length, "z0": floor, "z1": top,
-            "axis_z": s.roller_gap + r, "radius": r + max(s.diameters) / 2}
+            "body_z0": floor + PILE_FRONT_DEPTH_DIAMETERS * float(np.mean(s.diameters)),
+            "margin": FEED_BEHIND_FRONT_DIAMETERS * d_max, "min_x1": x_axis + min(room, s.feed_length),
+            "axis_z": axis_z, "radius": clear}
 
 
 def travel_segments(travel_steps: int, checkpoints: list, feeds: list, resume_step: int = 0) -> list[dict]:

@@ -373,6 +373,22 @@ def _failing_command(log_text: str) -> str | None:
     return commands[-1].strip() if commands else None
 
 
+#: LIGGGHTS' own timing breakdown after each ``run``: its name in the log -> ours.
+TIMING = {"Pair": "pair", "Neigh": "neigh", "Comm": "comm", "Outpt": "output", "Other": "other"}
+
+
+def timing_breakdown(text: str) -> dict:
+    """Seconds [s] LIGGGHTS spent in each part of its loop, summed over every ``run`` of a log:
+    ``pair`` (particle-particle contacts), ``neigh`` (neighbour lists), ``comm`` (MPI),
+    ``output`` and ``other`` (the fixes: mesh walls and their motion, insertion, integration),
+    and ``loop`` (their total)."""
+    found = re.findall(r"^(Pair|Neigh|Comm|Outpt|Other)\s+time \(%\) = (\S+)", text, re.MULTILINE)
+    parts = {name: 0.0 for name in TIMING.values()}
+    for name, seconds in found:
+        parts[TIMING[name]] += float(seconds)
+    return {**parts, "loop": float(sum(float(s) for s in re.findall(r"^Loop time of (\S+)", text, re.MULTILINE)))}
+
+
 def read_log(text: str) -> dict:
     """Health figures from a LIGGGHTS log.
 
@@ -380,7 +396,8 @@ def read_log(text: str) -> dict:
     ``thermo_style``), ``inserted`` (particles inserted), ``atoms_final``,
     ``max_rayleigh_fraction``/``max_hertz_fraction`` (time step over the
     Rayleigh and Hertz times, from ``check/timestep/gran``), ``warnings``,
-    ``printed`` (the values of the input's ``print "spreadmap <key> <value>"`` lines).
+    ``printed`` (the values of the input's ``print "spreadmap <key> <value>"`` lines),
+    ``timing_s`` (:func:`timing_breakdown`).
     """
     blocks, lines = [], text.splitlines()
     for i, line in enumerate(lines):
@@ -401,7 +418,7 @@ def read_log(text: str) -> dict:
     fractions = {key: float(thermo[col].max()) if col in thermo else float("nan")
                  for key, col in (("max_rayleigh_fraction", "ts[1]"), ("max_hertz_fraction", "ts[2]"))}
     printed = {key: float(value) for key, value in re.findall(r"^spreadmap (\w+) (\S+)$", text, re.MULTILINE)}
-    return {"thermo": thermo, "inserted": inserted, "printed": printed,
+    return {"thermo": thermo, "inserted": inserted, "printed": printed, "timing_s": timing_breakdown(text),
             "atoms_final": int(thermo["Atoms"].iloc[-1]) if len(thermo) else 0,
             "warnings": sorted(set(re.findall(r"^WARNING:.*$", text, re.MULTILINE))), **fractions}
 

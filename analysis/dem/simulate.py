@@ -29,11 +29,16 @@ from analysis.config import MAX_RUN_STEPS, PEAK_CAP, ConfigError, Scene, load_co
 from analysis.dem import geometry
 from analysis.dem.health import (
     MAX_STRAYS,
+    SQUEEZE_FACTOR,
     _check_timestep,
     check_kinetic_energy,
+    feed_health,
+    feed_landings,
     heap_supply,
+    inrun_health,
     layer_health,
     squeeze_out_speed,
+    squeeze_threshold,
     through_roller,
 )
 from analysis.dem.inputs import (
@@ -52,7 +57,7 @@ from analysis.dem.inputs import (
 from analysis.dem.liggghts import LiggghtsError, input_path, render, run
 from analysis.io import USER_ERRORS, error_line, write_json
 from analysis.metrics.dump import read_dump
-from analysis.physics import liggghts_seeds, roller_motion
+from analysis.physics import liggghts_seeds, polygon_bottom_range, roller_motion
 
 #: Length [m] over which the rough substrate ramps to flat outside the sampling region.
 ROUGH_TAPER = 0.5e-3
@@ -121,6 +126,7 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
 #: How far [m] a user's mesh may fall short of the bed's edges: float32 rounding (binary STL,
 #: PLY) moves them by nanometres.
 COVER_TOL = 1e-7
+
 
 def _check_units(substrate, s: Scene) -> None:
     """A ConfigError if the user's mesh looks like millimetres or micrometres, not metres
@@ -201,20 +207,47 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     return summary
 
 
-def roller_start(atoms, s: Scene, clearance: float | None = None) -> float:
+def roller_gap(s: Scene, substrate, roller) -> dict:
+    """Where the roller's axis goes so that its gap is the one set, and the gap as built.
+
+    The gap is measured from the substrate's mean plane under the sampling region (not the
+    whole field's), to the roller's bottom averaged over a turn (:func:`geometry.roller`:
+    the polygon's mean bottom is ``R`` below its axis, and a still roller stands at that
+    mean). Returns the axis height ``axis_z_m`` [m], the datum ``substrate_mean_region_m``,
+    the polygon's ``circumradius_m``, and in um the ``effective_gap_um`` (mean over a turn,
+    measured on the mesh as built) with its swing ``gap_min_um`` .. ``gap_max_um``.
+    """
+    datum = geometry.substrate_rms(substrate, s.sampling_region[:2])[0]
+    axis_z = datum + s.roller_gap + s.roller_radius
+    mesh = roller
+    near, far = polygon_bottom_range(s.roller_radius, s.roller_facets)
+    turns = np.linspace(0.0, 2 * np.pi, 3600, endpoint=False)
+    xz = mesh.vertices[:, [0, 2]]
+    depth = np.max(-(np.sin(turns)[:, None] * xz[:, 0] + np.cos(turns)[:, None] * xz[:, 1]), axis=1)
+    return {"axis_z_m": axis_z, "substrate_mean_region_m": datum, "circumradius_m": far,
+            "effective_gap_um": (axis_z - depth.mean() - datum) * 1e6,
+            "gap_still_um": (axis_z - geometry.roller_bottom_depth(mesh) - datum) * 1e6,
+            "gap_min_um": (axis_z - far - datum) * 1e6, "gap_max_um": (axis_z - near - datum) * 1e6}
+
+
+def roller_start(atoms, s: Scene, clearance: float | None = None, axis_z: float | None = None) -> float:
     """x [m] of the roller axis just behind the settled heap (no particle touched).
 
-    For each particle, the axis at height ``gap + R`` must stay ``R + r + clearance``
-    away; the start is the smallest such x over all particles.
+    For each particle, the axis at height ``axis_z`` (default ``gap + R``) must stay
+    ``R + r + clearance`` away; the start is the smallest such x over all particles.
     """
     clearance = 0.2 * min(s.diameters) if clearance is None else clearance
-    zc = s.roller_gap + s.roller_radius
+    zc = s.roller_gap + s.roller_radius if axis_z is None else axis_z
     reach = s.roller_radius + atoms["radius"].to_numpy() + clearance
     dz = np.minimum(np.abs(atoms["z"].to_numpy() - zc), reach)
     return float(np.min(atoms["x"].to_numpy() - np.sqrt(reach**2 - dz**2)))
 
 
 CHECKPOINT_DIR = "checkpoint"
+
+
+#: Where ``spread.in.j2`` writes each top-up's landed particles (``feed_landings.csv`` keeps them).
+FEED_DIR = "feed"
 
 
 def _checkpoints(out: Path, fingerprint: str) -> list[tuple[int, Path]]:
@@ -270,12 +303,15 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                (settled / "settled.dump", "the settled heap: --settled"))
     out.mkdir(parents=True, exist_ok=True)
     speed = U_mm_s * 1e-3
-    peak = float(geometry.load_stl(meshes / "substrate.stl").vertices[:, 2].max())
-    if peak >= s.roller_gap:  # a swept gap spreads over the substrate made under roller.gap_um
+    substrate = geometry.load_stl(meshes / "substrate.stl")
+    peak = float(substrate.vertices[:, 2].max())
+    gap = roller_gap(s, substrate, geometry.load_stl(meshes / "roller_shell.stl"))
+    # a swept gap spreads over the substrate made under roller.gap_um
+    if peak >= gap["axis_z_m"] - gap["circumradius_m"]:
         raise ConfigError(f"config key 'roller.gap_um' = {s.roller_gap * 1e6:g}: the substrate's highest peak "
                           f"({peak * 1e6:.0f} um) reaches the roller")
     atoms0 = read_dump(settled / "settled.dump").atoms
-    x0 = roller_start(atoms0, s)
+    x0 = roller_start(atoms0, s, axis_z=gap["axis_z_m"])
     if x0 - s.roller_radius <= s.box[0]:
         raise LiggghtsError(f"roller start x = {x0:.4g} m puts the roller outside the box (x >= {s.box[0]:.4g} m)")
     travel_time = (s.travel_end - x0) / speed
@@ -291,22 +327,28 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     motion = roller_motion(speed, omega_rad_s, s.roller_radius)
     heap_toe = float((atoms0["x"] + atoms0["radius"]).max())
     feeds = feed_plan(s, x0, speed, travel_steps, heap_toe)
-    feed = None
+    feed, fall_height = None, 0.0
+    first_fed_id = int(atoms0["id"].max()) + 1
     if feeds:
         floor = peak + max(s.diameters) / 2
         feed_seeds = liggghts_seeds(config["random_seed"] + 1000 * replicate + 500, len(s.diameters) + 1 + len(feeds))
         feed = {"mass": s.feed_pile_mass, "floor": floor, "template_seeds": feed_seeds[:len(s.diameters) + 1],
-                "seeds": dict(zip(feeds, feed_seeds[len(s.diameters) + 1:]))}
+                "seeds": dict(zip(feeds, feed_seeds[len(s.diameters) + 1:])),
+                "id_offset": first_fed_id - 1 - len(atoms0),
+                "trace": s.mean_particle_mass}
+        fall_height = feed_zone(s, x0, floor, gap["axis_z_m"])["z1"] - floor
+    wall_speed = speed + abs(omega_rad_s) * s.roller_radius
     context = dict(s=s, contact=contact_model(s), box=[f"{v:.6g}" for v in s.box], U_mm_s=U_mm_s,
                    omega_rad_s=omega_rad_s, motion=motion, restart=input_path(settled / "settled.restart", out),
                    skin=skin(s),
                    binsize=binsize(s), thermo_every=THERMO_EVERY, processors=processors_grid(s),
                    substrate_stl=input_path(meshes / "substrate.stl", out),
                    roller_stl=input_path(meshes / "roller_shell.stl", out),
-                   roller_z=s.roller_gap + s.roller_radius, travel_steps=travel_steps,
+                   roller_z=gap["axis_z_m"], travel_steps=travel_steps,
                    **rest_loop(s, s.rest_time, stop_at_rest="stop_at_rest" in skips),
                    travel_end=s.travel_end, remove_ahead="remove_ahead" in skips,
                    movie_every=movie_every, movie="movie.dump",
+                   squeeze_speed=squeeze_threshold(wall_speed, fall_height), squeeze={"factor": SQUEEZE_FACTOR},
                    dump="final.dump.part", checkpoint_dir=CHECKPOINT_DIR)
 
     def render_from(step: int, restart: Path | None) -> str:
@@ -316,7 +358,8 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                                    step)
         for seg in segments:
             if seg["feed"]:
-                seg["zone"] = feed_zone(s, x0 + speed * seg["start"] * s.timestep, feed["floor"])
+                seg["zone"] = feed_zone(s, x0 + speed * seg["start"] * s.timestep, feed["floor"],
+                                       gap["axis_z_m"])
                 seg["seed"] = feed["seeds"][seg["start"]]
         return render("spread.in.j2", resume=restart and input_path(restart, out), resume_step=step,
                       sfx="_resumed" if step else "",
@@ -326,9 +369,10 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     fresh = render_from(0, None)
     fingerprint = hashlib.sha256(fresh.encode()).hexdigest()
     for step, restart in _checkpoints(out, fingerprint) + [(0, None)]:
-        if restart is None:  # a fresh start: forget any other input's checkpoints
-            shutil.rmtree(out / CHECKPOINT_DIR, ignore_errors=True)
-            (out / CHECKPOINT_DIR).mkdir()
+        if restart is None:  # a fresh start: forget any other input's checkpoints and feed records
+            for folder in (CHECKPOINT_DIR, FEED_DIR):
+                shutil.rmtree(out / folder, ignore_errors=True)
+                (out / folder).mkdir()
             (out / CHECKPOINT_DIR / "input.sha256").write_text(fingerprint)
         (out / "spread.in").write_text(fresh if restart is None else render_from(step, restart))
         try:
@@ -340,8 +384,9 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
             print(f"warning: resuming from {restart} failed, trying an older checkpoint or a fresh start:\n{err}",
                   file=sys.stderr)
     _check_timestep(log, s)
-    health = check_kinetic_energy(log, wall_speed=speed + abs(omega_rad_s) * s.roller_radius,
+    health = check_kinetic_energy(log, wall_speed=wall_speed,
                                   squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
+    health.update(inrun_health(log, s))
     if not (out / "final.dump.part").is_file():
         tail = "\n".join((out / "spread.log.screen").read_text(errors="replace").strip().splitlines()[-8:])
         raise LiggghtsError(f"LIGGGHTS ended (exit 0, no ERROR line) without writing {out / 'final.dump.part'}; "
@@ -360,17 +405,26 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                   **layer_health(atoms, s, meshes / "substrate.stl", len(atoms0) + fed - removed))
     health.update(heap_supply(ahead, s.heap_particles), removed_ahead_of_roller=removed,
                   mass_ahead_of_roller_kg=float(log["printed"]["mass_ahead_of_roller_kg"]))
+    if feeds:
+        landings = feed_landings(out / FEED_DIR, log["printed"], lambda step: x0 + speed * step * s.timestep,
+                                 s.timestep, dict(zip(feeds, feeds[1:] + [travel_steps])))
+        landings.to_csv(out / "feed_landings.csv", index=False)
+        health.update(feed_topups=len(feeds), **feed_health(landings, atoms, first_fed_id, s.sampling_region))
     thermo = log["thermo"]
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
+    # particle-steps of every particle integrated during the run (the pile included), per CPU second
+    particle_steps = float(np.sum(np.diff(thermo["Step"].to_numpy()) * thermo["Atoms"].to_numpy()[1:]))
     summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"], "cpu_s": log["cpu_s"],
                "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
                "mpi_launcher": log["launcher"], "processors": context["processors"],
                "roller_start_m": x0, "roller_travel_m": speed * travel_steps * s.timestep,
                "rayleigh_fraction": log["max_rayleigh_fraction"], "hertz_fraction": log["max_hertz_fraction"],
-               "particle_steps_per_s": len(atoms) * (last - first) / log["wall_s"],
-               **health}
+               "particle_steps": particle_steps, "particle_steps_per_s": particle_steps / max(log["cpu_s"], 1e-9),
+               **{f"time_{part}_s": seconds for part, seconds in log["timing_s"].items()},
+               **{k: v for k, v in gap.items() if k != "circumradius_m"}, **health}
     _publish(out, summary, "final.dump")
-    shutil.rmtree(out / CHECKPOINT_DIR, ignore_errors=True)
+    for folder in (CHECKPOINT_DIR, FEED_DIR):
+        shutil.rmtree(out / folder, ignore_errors=True)
     for forced in out.glob("restart_forced_liggghts_*.data"):  # LIGGGHTS' own, written when a kill stopped it
         forced.unlink()
     return summary

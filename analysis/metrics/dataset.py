@@ -54,8 +54,14 @@ def point_label(point: dict) -> str:
 
 HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller",
           "atoms", "lost", "through_substrate", "through_roller", "max_overlap_fraction", "peak_speed_m_s",
-          "kinetic_energy_J", "steps", "wall_s", "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction",
-          "roller_travel_m", "cpu_s", "resumed_from_step"]
+          "kinetic_energy_J", "steps", "wall_s", "particle_steps", "particle_steps_per_s", "rayleigh_fraction",
+          "hertz_fraction", "roller_travel_m", "cpu_s", "resumed_from_step",
+          "effective_gap_um", "gap_min_um", "gap_max_um", "substrate_mean_region_m",
+          "inrun_max_overlap_um", "inrun_max_overlap_fraction", "inrun_max_wall_overlap_um",
+          "inrun_max_wall_overlap_fraction", "squeeze_outs_max", "squeeze_out_samples",
+          "feed_topups", "fed_max_ahead_of_front_mm", "fed_share_of_region_layer",
+          "fed_in_region_landed_ahead_of_roller_mm_median",
+          "time_pair_s", "time_neigh_s", "time_comm_s", "time_other_s", "time_loop_s"]
 
 
 class UnsoundRunError(ValueError):
@@ -180,3 +186,14 @@ def point_means(df, split=None):
     test_points = np.unique(groups[np.asarray(split[1], int)])
     is_test = np.isin(np.arange(len(points)), test_points)
     return points, (np.flatnonzero(~is_test), np.flatnonzero(is_test))
+
+
+def workflow_summary(dataset, wall_s: float) -> str:
+    """One line on what a workflow's spreads cost: runs, LIGGGHTS' CPU time, the particle-steps
+    per CPU second over every particle integrated (``particle_steps``), and the workflow's wall
+    time ``wall_s`` [s]. ``dataset`` is a ``dataset.csv`` path or its table."""
+    df = pd.read_csv(dataset) if isinstance(dataset, (str, Path)) else dataset
+    cpu = float(df["cpu_s"].sum())
+    rate = float(df["particle_steps"].sum()) / cpu if "particle_steps" in df and cpu > 0 else float("nan")
+    return (f"spreadmap: {len(df)} runs, LIGGGHTS CPU {cpu / 60:.1f} min ({cpu / max(len(df), 1):.0f} s a run), "
+            f"{rate / 1e6:.2f} M particle-steps per CPU second, workflow wall time {wall_s / 60:.1f} min")

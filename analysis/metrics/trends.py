@@ -9,10 +9,18 @@ import numpy as np
 import pandas as pd
 
 
-def trend_table(data: pd.DataFrame, roller_radius_mm: float) -> list[tuple[str, str, str]]:
+def _share_verdict(share: float) -> str:
+    """"yes" where a per-U statement holds at 80 % of the speeds or more, "partly" at half."""
+    return "yes" if share >= 0.8 else "partly" if share >= 0.5 else "no"
+
+
+def trend_table(data: pd.DataFrame, roller_radius_mm: float,
+                mean_diameter_um: float = 175.0) -> list[tuple[str, str, str]]:
     """(paper's statement, measured here, agrees?) rows, from replicate means.
 
-    ``roller_radius_mm`` (mm) places the roller's bottom point at rest, U = -omega R.
+    ``roller_radius_mm`` (mm) places the roller's bottom point at rest, U = -omega R;
+    ``mean_diameter_um`` (um) counts the layers a deposit's ``thickness_um`` makes (a row
+    the dataset has no column for is left out).
     """
     mean = data.groupby(["U_mm_s", "omega_rad_s"], as_index=False).mean(numeric_only=True)
     rows = []
@@ -21,6 +29,33 @@ def trend_table(data: pd.DataFrame, roller_radius_mm: float) -> list[tuple[str, 
         ratio = neg[col].mean() / pos[col].mean()
         rows.append((f"{name} jumps when omega turns negative (multi-layer deposition)",
                      f"mean {name} at omega < 0 is {ratio:.2f} x that at omega > 0", "yes" if ratio > 1.1 else "no"))
+    for col, name in (("mass_g", "M_s"), ("throughput_mm2_s", "Q_s")):
+        table = mean.pivot(index="U_mm_s", columns="omega_rad_s", values=col)
+        falling = table[[w for w in table.columns if w >= 0]]      # omega = 0, 5, 10, ...
+        share = np.mean(np.all(np.diff(falling.to_numpy(), axis=1) < 0, axis=1)) if falling.shape[1] > 1 else 0.0
+        rows.append((f"{name} rises as omega falls from positive to zero",
+                     f"falling in omega over omega >= 0 at {share:.0%} of the U", _share_verdict(share)))
+        back = table[sorted((w for w in table.columns if w <= 0), reverse=True)]   # 0, -5, -10, ...
+        peak = back.to_numpy().argmax(axis=1)
+        interior = np.mean((peak > 0) & (peak < back.shape[1] - 1)) if back.shape[1] > 2 else 0.0
+        rows.append((f"{name} first rises then falls as negative omega grows in magnitude",
+                     f"largest between omega = 0 and {back.columns[-1]:g} rad/s at omega = "
+                     + ", ".join(f"{w:g}" for w in back.columns[peak]) + " (U = "
+                     + ", ".join(f"{u:g}" for u in back.index) + f"): inside the range at {interior:.0%} of the U",
+                     _share_verdict(interior)))
+    if "thickness_um" in mean:
+        layers = mean.thickness_um / mean_diameter_um
+        still, forward, counter = (layers[mean.omega_rad_s == 0].mean(), layers[mean.omega_rad_s < 0].mean(),
+                                   layers[mean.omega_rad_s > 0].mean())
+        rows.append(("omega = 0 and omega < 0 lay 2-3 layers, omega > 0 a single one",
+                     f"deposit thickness over the mean diameter: {still:.2f} at omega = 0, {forward:.2f} at "
+                     f"omega < 0, {counter:.2f} at omega > 0",
+                     "yes" if min(still, forward) >= 1.8 and counter <= 1.5 else
+                     "partly" if max(still, forward) >= 1.8 and counter <= 1.5 else "no"))
+    jump = neg.porosity_pct.mean() - pos.porosity_pct.mean()
+    rows.append(("Phi jumps up when omega turns negative",
+                 f"mean Phi at omega < 0: {neg.porosity_pct.mean():.1f} %, at omega > 0: "
+                 f"{pos.porosity_pct.mean():.1f} %", "yes" if jump > 2 else "no"))
     by_omega = mean.pivot(index="U_mm_s", columns="omega_rad_s", values="throughput_mm2_s")
     rising = np.mean([np.all(np.diff(by_omega[w].to_numpy()) > 0) for w in by_omega.columns])
     corr = mean[["U_mm_s", "throughput_mm2_s"]].corr(method="spearman").iloc[0, 1]
