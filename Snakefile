@@ -6,9 +6,17 @@ from pathlib import Path
 from snakemake.utils import min_version
 
 # the analysis package is installed by the README's setup (pip install -e .)
-from analysis.config import coerce_cli_values
+from analysis.config import ConfigError, coerce_cli_values, read_config_file
 
 min_version("9.0")
+
+# A YAML error in config.yaml or a --config value: one line with the file (or the argument) and
+# the line and column (Snakemake's own message names neither).
+try:
+    if Path("config.yaml").is_file():
+        read_config_file("config.yaml")
+except ConfigError as err:
+    raise WorkflowError(str(err)) from None
 
 
 configfile: "config.yaml"
@@ -17,7 +25,10 @@ configfile: "config.yaml"
 report: "report/workflow.rst"  # the report's front page
 
 
-config.update(coerce_cli_values(config))  # --config values arrive as strings
+try:
+    config.update(coerce_cli_values(config))  # --config values arrive as strings
+except ConfigError as err:
+    raise WorkflowError(str(err)) from None
 
 
 # rules/common.smk checks the config once, against analysis/schemas/config.schema.yaml and across keys

@@ -8,10 +8,12 @@ simulation starts.
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import itertools
 import json
 import math
+import re
 from dataclasses import dataclass
 from math import sqrt
 from pathlib import Path
@@ -38,23 +40,53 @@ class ConfigError(ValueError):
     """A configuration value is wrong; the message names its key and value."""
 
 
-def coerce_cli_values(value):
+class StrictLoader(yaml.SafeLoader):
+    """YAML as its 1.2 core schema reads it: ``true``/``false`` are the only booleans (``yes``,
+    ``on``, ``y`` stay strings, which the schema then refuses where a boolean is wanted), and
+    ``1e9`` is a number (YAML 1.1 wants ``1.0e+9``)."""
+
+
+StrictLoader.yaml_implicit_resolvers = {
+    first: [(tag, regex) for tag, regex in resolvers if tag != "tag:yaml.org,2002:bool"]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+StrictLoader.add_implicit_resolver("tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
+                                   list("tTfF"))
+StrictLoader.add_implicit_resolver("tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$"),
+                                   list("-+0123456789"))
+
+
+def parse_yaml(text: str, source: str):
+    """``text`` parsed by :class:`StrictLoader`; a syntax error is one :class:`ConfigError` line
+    naming ``source`` (a file, or a ``--config`` argument) and the line and column."""
+    try:
+        return yaml.load(text, Loader=StrictLoader)  # noqa: S506 (a SafeLoader)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        what = " ".join(str(getattr(err, "problem", None) or err).split())
+        raise ConfigError(f"{source}: YAML syntax error{where}: {what}") from None
+
+
+def coerce_cli_values(value, key: str = ""):
     """Numbers, booleans and nulls from strings, recursively.
 
     Snakemake parses nested ``--config key='{...}'`` values with YAML's
     BaseLoader, which leaves every scalar a string; this restores the types
-    so that ``--config sweep='{"U_mm_s": [40, 70]}'`` works.
+    so that ``--config sweep='{"U_mm_s": [40, 70]}'`` works. A value that is
+    not YAML raises :class:`ConfigError` naming ``--config <key>=<value>``.
     """
     if isinstance(value, dict):
-        return {k: coerce_cli_values(v) for k, v in value.items()}
+        return {k: coerce_cli_values(v, f"{key}.{k}" if key else str(k)) for k, v in value.items()}
     if isinstance(value, list):
-        return [coerce_cli_values(v) for v in value]
+        return [coerce_cli_values(v, key) for v in value]
     if isinstance(value, str):
-        return yaml.safe_load(value) if value.strip() else value
+        return parse_yaml(value, f"--config {key}={value}".replace("\n", "\\n")) if value.strip() else value
     return value
 
 
+@functools.cache
 def load_schema() -> dict:
+    """The config's JSON Schema (read once; not to be changed in place)."""
     return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
@@ -73,13 +105,27 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
         path = Path(source)
         if not path.is_file():
             raise ConfigError(f"config file {str(path)!r} does not exist")
-        config = yaml.safe_load(path.read_text())
+        config = read_config_file(path)
         base_dir = path.parent if base_dir is None else base_dir
     else:
         config = copy.deepcopy(source)
     check_finite(config)
     validate_schema(config)
     check_config(config, Path(base_dir or "."))
+    return config
+
+
+def read_config_file(path: str | Path) -> dict:
+    """The mapping in a YAML config file; an empty file, a syntax error or a top level that is
+    not a mapping raises one :class:`ConfigError` line naming the file (and the line, column)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{path}: not a YAML text file ({err.reason} at byte {err.start})") from None
+    config = parse_yaml(text, str(path))
+    if not isinstance(config, dict):
+        raise ConfigError(f"{path}: " + ("empty: no config keys" if config is None else
+                                         f"holds a {type(config).__name__}, not a mapping of config keys"))
     return config
 
 
@@ -99,9 +145,22 @@ def check_finite(config, key: str = "") -> None:
         _fail(key or "<top level>", config, "must be a finite number")
 
 
+#: JSON Schema counts 2.0 as an integer; a count or a seed written 2.0 is refused instead
+#: (``range(2.0)`` and a seed of '11027.0' fail later, far from the key).
+_Validator = jsonschema.validators.extend(
+    jsonschema.Draft202012Validator,
+    type_checker=jsonschema.Draft202012Validator.TYPE_CHECKER.redefine(
+        "integer", lambda _, value: isinstance(value, int) and not isinstance(value, bool)))
+
+
+@functools.cache
+def _validator():
+    return _Validator(load_schema())
+
+
 def validate_schema(config: dict) -> None:
     """Raise :class:`ConfigError` on the first schema violation, naming key and value."""
-    validator = jsonschema.Draft202012Validator(load_schema())
+    validator = _validator()
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
     if errors:
         error = errors[0]
@@ -188,6 +247,39 @@ def check_physics(config: dict, base_dir: Path = Path(".")) -> None:
         if lvl["sampling_start_mm"] < lvl.get("heap_start_mm", 0) + lvl["heap_length_mm"]:
             _fail(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
                   f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")
+    check_bounds(config)
+
+
+#: The most time steps one LIGGGHTS ``run`` command takes (a signed 32-bit count):
+#: beyond it LIGGGHTS stops with "Invalid run command".
+MAX_RUN_STEPS = 2**31 - 1
+
+#: Nodes of the generated rough substrate at most (its random field and mesh: about 1 kB a node).
+MAX_SUBSTRATE_NODES = 10_000_000
+
+#: The roller's surface moves at most this fraction of the smallest particle's radius in a time step.
+MAX_WALL_STEP = 0.1
+
+
+def check_bounds(config: dict) -> None:
+    """Bounds that hold between keys: each level's settle and rest fit LIGGGHTS' run command
+    (:data:`MAX_RUN_STEPS`) and its generated substrate the memory (:data:`MAX_SUBSTRATE_NODES`)."""
+    fraction = config["timestep"]["rayleigh_fraction"]
+    for name, lvl in config["fidelity"].items():
+        s = scene(config, name)
+        for key in ("settle_time_s", "rest_time_s"):
+            steps = lvl[key] / s.timestep
+            if steps > MAX_RUN_STEPS:
+                _fail(f"fidelity.{name}.{key}", lvl[key],
+                      f"takes {steps:.3g} time steps of {s.timestep:.3g} s (timestep.rayleigh_fraction = {fraction!r}):"
+                      f" at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
+        if config["substrate"]["mesh"] is None:
+            spacing = config["substrate"]["grid_spacing_um"] * 1e-6
+            nodes = ((s.rough_x[1] - s.rough_x[0] + 1e-3) / spacing + 1) * (s.strip_width / spacing + 1)
+            if nodes > MAX_SUBSTRATE_NODES:
+                _fail("substrate.grid_spacing_um", config["substrate"]["grid_spacing_um"],
+                      f"gives fidelity.{name}'s rough substrate {nodes:.3g} nodes: at most {MAX_SUBSTRATE_NODES:.0e}"
+                      " (memory)")
 
 
 def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
@@ -222,19 +314,9 @@ def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
     for values in run:                      # and every combination run (cross-key facts between axes)
         if len(values) > 1:
             _check_variant(config, values, base_dir, "sweep", values)
-    gap = config["roller"]["gap_um"]
     for value in dict.fromkeys([*sweep.get("roller.gap_um", []), *(v["roller.gap_um"] for v in run
                                                                     if "roller.gap_um" in v)]):
-        if value < gap:
-            _fail("sweep.roller.gap_um", value,
-                  f"is below roller.gap_um = {gap!r}, the gap the heap is settled and the substrate's peaks "
-                  f"are capped under (at {PEAK_CAP:g} x) for every swept gap: set roller.gap_um to the "
-                  "smallest swept gap")
-        spread, heap_box = scene(resolve(config, {"roller.gap_um": value})), scene(config).box
-        if spread.box[1] > heap_box[1] or spread.roller_gap + 2 * spread.roller_radius > heap_box[5]:
-            _fail("sweep.roller.gap_um", value,
-                  f"puts the roller or its feed outside the simulation box of the heap settled at "
-                  f"roller.gap_um = {gap!r} (the spread starts from its restart): sweep gaps closer to it")
+        check_swept_gap(config, value)
     runs = sweep_runs(config)
     names = [run.name for run in runs]
     repeated = sorted({n for n in names if names.count(n) > 1})
@@ -247,6 +329,49 @@ def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
     if config["surrogate"]["n_test"] > n_points - 3:
         _fail("surrogate.n_test", config["surrogate"]["n_test"],
               f"leaves fewer than 3 of the sweep's {n_points} points to train on")
+    if config["surrogate"]["cv_folds"] > n_points:
+        _fail("surrogate.cv_folds", config["surrogate"]["cv_folds"],
+              f"exceeds the sweep's {n_points} points (each fold holds out whole points)")
+    check_speeds(config)
+
+
+def check_speeds(config: dict) -> None:
+    """Each run's speeds against its time step: the slowest travel fits a LIGGGHTS run
+    (:data:`MAX_RUN_STEPS`), the roller's surface moves less than :data:`MAX_WALL_STEP` of the
+    smallest radius a step."""
+    for values in variants(config):
+        s = scene(resolve(config, values))
+        points = [p for p in sweep_points(config) if all(p[k] == v for k, v in values.items())]
+        slowest = min(points, key=lambda p: p["U_mm_s"])
+        steps = (s.travel_end - s.box[0]) / (slowest["U_mm_s"] * 1e-3) / s.timestep
+        if steps > MAX_RUN_STEPS:
+            _fail("sweep.U_mm_s", slowest["U_mm_s"], f"needs {steps:.3g} time steps of {s.timestep:.3g} s to travel "
+                  f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm: at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
+        r_min = min(s.diameters) / 2
+        for p in points:
+            wall = (p["U_mm_s"] * 1e-3 + abs(p["omega_rad_s"]) * s.roller_radius) * s.timestep
+            if wall > MAX_WALL_STEP * r_min:
+                key = "sweep.U_mm_s" if p["U_mm_s"] * 1e-3 >= abs(p["omega_rad_s"]) * s.roller_radius \
+                    else "sweep.omega_rad_s"
+                _fail(key, p[key.split(".")[1]],
+                      f"moves the roller's surface {wall * 1e6:.3g} um a time step of {s.timestep:.3g} s (U = "
+                      f"{p['U_mm_s']:g} mm/s, omega = {p['omega_rad_s']:g} rad/s): more than {MAX_WALL_STEP:g} of the "
+                      f"smallest radius ({r_min * 1e6:.3g} um); lower the speeds or timestep.rayleigh_fraction")
+
+
+def check_swept_gap(config: dict, value: float) -> None:
+    """A swept gap spreads the heap settled under ``roller.gap_um``: at least that gap, and in its box."""
+    gap = config["roller"]["gap_um"]
+    if value < gap:
+        _fail("sweep.roller.gap_um", value,
+              f"is below roller.gap_um = {gap!r}, the gap the heap is settled and the substrate's peaks "
+              f"are capped under (at {PEAK_CAP:g} x) for every swept gap: set roller.gap_um to the "
+              "smallest swept gap")
+    spread, heap_box = scene(resolve(config, {"roller.gap_um": value})), scene(config).box
+    if spread.box[1] > heap_box[1] or spread.roller_gap + 2 * spread.roller_radius > heap_box[5]:
+        _fail("sweep.roller.gap_um", value,
+              f"puts the roller or its feed outside the simulation box of the heap settled at "
+              f"roller.gap_um = {gap!r} (the spread starts from its restart): sweep gaps closer to it")
 
 
 def _check_variant(config: dict, values: dict, base_dir: Path, key: str, shown) -> None:
@@ -327,6 +452,8 @@ def resolve(config: dict, values: dict) -> dict:
         node = out
         for k in path:
             node = node[k]
+        if isinstance(node[last], int) and not isinstance(node[last], bool) and float(value).is_integer():
+            value = int(value)      # a swept count stays an integer (the sweep reads its values as floats)
         if node[last] != value:     # the config's own value keeps its type (300, not 300.0): same fingerprint
             node[last] = value
     return out
@@ -340,15 +467,39 @@ EXECUTION_KEYS = ("mpi_ranks", "runtime_min", "mem_mb_per_rank", "checkpoints_pe
 SIMULATION_SECTIONS = ("random_seed", "material", "psd", "roller", "substrate", "rest_rms_speed_mm_s", "timestep")
 
 
-def simulation_fingerprint(config: dict, level: str, sections=SIMULATION_SECTIONS) -> str:
+def simulation_fingerprint(config: dict, level: str, sections=SIMULATION_SECTIONS,
+                           base_dir: str | Path = ".") -> str:
     """A short hash of everything in ``config`` that a simulation of ``level``
     computes with (``sections`` and the level's fidelity keys but
-    EXECUTION_KEYS). The workflow passes it as a rule parameter, so that
+    EXECUTION_KEYS), a user's ``substrate.mesh`` (relative to ``base_dir``) by its content.
+    The workflow passes it as a rule parameter, so that
     Snakemake re-runs the simulations when the physics changes (and not when
     only the MPI ranks or the cluster limits do)."""
     relevant = {key: config.get(key) for key in sections}
     relevant["fidelity"] = {k: v for k, v in config["fidelity"][level].items() if k not in EXECUTION_KEYS}
+    mesh = config["substrate"]["mesh"] if "substrate" in sections else None
+    if mesh is not None:
+        relevant["substrate_mesh_sha256"] = file_digest(Path(base_dir) / mesh)
     return hashlib.sha256(json.dumps(relevant, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 of a file's content (cached by path, size and modification time); '' if it is missing."""
+    path = Path(path).resolve()
+    try:
+        stat = path.stat()
+    except OSError:
+        return ""
+    return _digest(path, stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _digest(path: Path, size: int, mtime_ns: int) -> str:
+    sha = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            sha.update(block)
+    return sha.hexdigest()
 
 
 def run_name(U: float, omega: float, replicate: int) -> str:
@@ -479,7 +630,7 @@ def heap_config(config: dict, run: Run) -> dict:
     return resolve(config, run.heap_values)
 
 
-def run_parameters(config: dict, run: Run) -> dict:
+def run_parameters(config: dict, run: Run, base_dir: str | Path = ".") -> dict:
     """Everything a run computes with, resolved (its extra axes' values in place), JSON/YAML-ready:
     ``run`` (folder), ``U_mm_s``, ``omega_rad_s``, ``replicate``, ``swept`` (the extra axes'
     values), ``heap`` (its settle's folder), ``level``, ``roller_gap`` (the gap as built, um),
@@ -494,7 +645,7 @@ def run_parameters(config: dict, run: Run) -> dict:
            "max_um": gap_um + (radius_mm - near) * mm_to_um}
     return {"run": run.name, "U_mm_s": run.U, "omega_rad_s": run.omega, "replicate": run.replicate,
             "swept": dict(run.values), "heap": run.heap, "level": level, "roller_gap": gap,
-            "physics": simulation_fingerprint(resolved, level),
+            "physics": simulation_fingerprint(resolved, level, base_dir=base_dir),
             "config": {**{k: resolved[k] for k in (*SIMULATION_SECTIONS, "profilometer")},
                        "fidelity": {level: resolved["fidelity"][level]}}}
 
@@ -502,6 +653,97 @@ def run_parameters(config: dict, run: Run) -> dict:
 def runs_by_name(config: dict) -> dict[str, Run]:
     """:func:`sweep_runs` by folder name (``Run.name``)."""
     return {run.name: run for run in sweep_runs(config)}
+
+
+_AXIS_FOLDER = re.compile(r"([A-Za-z_][A-Za-z0-9_.]*)=([^/]+)")
+_RUN_FOLDER = re.compile(r"U([^_/]+)_w([^_/]+)_r(\d+)")
+
+
+def find_run(config: dict, name: str, table: dict | None = None, base_dir: str | Path = ".") -> Run:
+    """The run of folder ``name`` (its path under ``runs/``): the sweep's (``table``, default
+    :func:`runs_by_name`), or a point outside the sweep named by its folder, e.g.
+    ``U100_w-7_r0`` or ``roller.gap_um=350/U70_w-5_r1``: its speeds, replicate and the extra axes'
+    values, each checked as a swept one is (the axes not named take the config's own values).
+
+    Raises :class:`ConfigError` naming the folder and what is wrong with it, in one line."""
+    table = runs_by_name(config) if table is None else table
+    if name in table:
+        return table[name]
+    *folders, leaf = name.split("/")
+    match = _RUN_FOLDER.fullmatch(leaf)
+    if not match:
+        raise ConfigError(f"run folder {name!r}: not a run's folder name, U<mm/s>_w<rad/s>_r<replicate> "
+                          "(e.g. U70_w-5_r0), after a folder <axis>=<value>/ for each extra sweep axis")
+    U, omega = (_folder_number(name, key, text) for key, text in (("U_mm_s", match[1]), ("omega_rad_s", match[2])))
+    values = _folder_values(config, name, folders, SPEED_AXES)
+    trial = copy.deepcopy(config)
+    trial["sweep"] = {"U_mm_s": [U], "omega_rad_s": [omega], "replicates": int(match[3]) + 1,
+                      **{axis: [value] for axis, value in values.items()}}
+    try:
+        check_finite(trial["sweep"], "sweep")
+        validate_schema(trial)
+        if values:
+            _check_variant(config, values, Path(base_dir), "sweep", values)
+        if "roller.gap_um" in values:
+            check_swept_gap(config, values["roller.gap_um"])
+        check_speeds(trial)
+    except ConfigError as err:
+        raise ConfigError(f"run folder {name!r}: {err}") from None
+    return _named(config, name, Run(U, omega, int(match[3]), tuple(values.items()), _own(config)), "name")
+
+
+def find_heap(config: dict, name: str, table: dict | None = None, base_dir: str | Path = ".") -> Run:
+    """The first run of heap folder ``name`` (``r0``, ``psd.mean_diameter_um=150/r1``): the sweep's
+    (``table``, default :func:`heaps_by_name`), or a heap outside it named by its folder (a new
+    replicate, or values of the axes the heap depends on). Raises :class:`ConfigError` naming it."""
+    table = heaps_by_name(config) if table is None else table
+    if name in table:
+        return table[name]
+    *folders, leaf = name.split("/")
+    if not re.fullmatch(r"r\d+", leaf):
+        raise ConfigError(f"heap folder {name!r}: not a heap's folder name, r<replicate> (e.g. r0), after a "
+                          "folder <axis>=<value>/ for each extra sweep axis the heap depends on")
+    values = _folder_values(config, name, folders, (*SPEED_AXES, *SPREAD_ONLY_AXES))
+    if values:
+        try:
+            _check_variant(config, values, Path(base_dir), "sweep", values)
+        except ConfigError as err:
+            raise ConfigError(f"heap folder {name!r}: {err}") from None
+    first = sweep_runs(config)[0]
+    return _named(config, name, Run(first.U, first.omega, int(leaf[1:]), tuple(values.items()), _own(config)),
+                  "heap")
+
+
+def _own(config: dict) -> tuple:
+    return tuple((a, config_value(config, a)) for a in sweep_axes(config))
+
+
+def _named(config: dict, name: str, run: Run, attribute: str) -> Run:
+    """``run`` if its folder is spelt ``name``; else a ConfigError giving its spelling."""
+    if getattr(run, attribute) != name:
+        raise ConfigError(f"{'run' if attribute == 'name' else 'heap'} folder {name!r}: its point's folder is "
+                          f"{getattr(run, attribute)!r} (numbers as :g writes them, the sweep's axes in order)")
+    return run
+
+
+def _folder_number(name: str, key: str, text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ConfigError(f"folder {name!r}: {key} = {text!r} is not a number") from None
+
+
+def _folder_values(config: dict, name: str, folders: list, excluded) -> dict:
+    """The extra axes' values named by the ``<axis>=<value>`` folders of ``name``, in sweep order."""
+    axes = [a for a in sweep_axes(config) if a not in excluded]
+    values = {}
+    for folder in folders:
+        match = _AXIS_FOLDER.fullmatch(folder)
+        if not match or match[1] not in axes:
+            raise ConfigError(f"folder {name!r}: {folder!r} does not name an axis of the sweep as <axis>=<value> "
+                              f"(its axes here: {', '.join(axes) or 'none'})")
+        values[match[1]] = _folder_number(name, match[1], match[2])
+    return {a: values[a] for a in axes if a in values}
 
 
 def heaps_by_name(config: dict) -> dict[str, Run]:

@@ -14,6 +14,22 @@ import sys
 from analysis.io import USER_ERRORS, error_line
 
 
+def by_folder(find, config: dict, table: dict, base_dir):
+    """``name -> find(config, name, table, base_dir)`` for the rules' input functions and params
+    (:func:`analysis.config.find_run`, :func:`~analysis.config.find_heap`): a ConfigError becomes
+    Snakemake's WorkflowError, one line naming the folder."""
+    from snakemake.exceptions import WorkflowError
+
+    from analysis.config import ConfigError
+
+    def of(name):
+        try:
+            return find(config, name, table, base_dir)
+        except ConfigError as err:
+            raise WorkflowError(str(err)) from None
+    return of
+
+
 @contextlib.contextmanager
 def rule_context(smk):
     log = open(smk.log[0], "w") if smk.log else sys.stderr

@@ -7,7 +7,7 @@ Run from the repository root::
 Runs ``pytest tests/test_fuzz.py`` with ``FUZZ_EXAMPLES`` cases per test (the test suite
 uses 150) and Hypothesis' statistics, and writes how many cases each test tried, how
 they ended (refused with a one-line error, or accepted) and any failure to
-``benchmarks/measured/fuzz.md``. Exits with pytest's status.
+``benchmarks/measured/fuzz.md``, with the commit measured. Exits with pytest's status.
 """
 import argparse
 import os
@@ -26,6 +26,11 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--examples", type=int, default=5000, help="cases per test (default 5000)")
     args = parser.parse_args(argv)
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                            text=True).stdout.strip() or "unknown"
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT, capture_output=True,
+                           text=True).stdout.strip()
+    commit += " with uncommitted changes" if dirty else ""
     start = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/test_fuzz.py",
                            "--hypothesis-show-statistics"], cwd=ROOT, capture_output=True, text=True,
@@ -42,10 +47,11 @@ def main(argv=None):
         rows.append(f"| `{name.group(1)}` | {counts.group(1)} | {counts.group(2)} | {counts.group(3)} | {events} |")
     summary = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else proc.stderr[-500:]
     text = "\n".join([
-        "# Fuzzing the config check, the dump reader and layer_metrics",
+        "# Fuzzing the config check (values, YAML text), the dump reader (plain, gzip) and layer_metrics",
         "",
-        f"Measured {machine()}, in {elapsed:.0f} s, by `.venv/bin/python benchmarks/bench_fuzz.py "
-        f"--examples {args.examples}` (tests/test_fuzz.py, seeded: the same cases every run).",
+        f"Measured at commit {commit}, {machine()}, in {elapsed:.0f} s, by `.venv/bin/python "
+        f"benchmarks/bench_fuzz.py --examples {args.examples}` (tests/test_fuzz.py, seeded: the same cases "
+        "every run).",
         "",
         "Each case must end in a result or a one-line error naming the key or the file, with nothing "
         "half-written; a failing case is one that did not.",

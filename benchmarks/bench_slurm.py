@@ -4,6 +4,7 @@ Run from the repository root, as root, after ``apt-get install slurm-wlm munge l
 slurmdbd mariadb-server`` (Debian 12: SLURM 22.05.8)::
 
     .venv/bin/python benchmarks/bench_slurm.py [--keep] [--scratch DIR] [--limit-point 100:-5]
+    .venv/bin/python benchmarks/bench_slurm.py --dry-run   # its Snakemake commands resolve; no cluster
 
 1. **A failing job is seen**: on a one-node cluster with accounting (munge, MariaDB,
    slurmdbd, slurmctld, slurmd; :mod:`analysis.slurm_cluster`), a settle that cannot
@@ -117,7 +118,8 @@ def compare(slurm_runs, local_runs, tolerance):
     """Each SLURM run against its local twin: bit identity and metric differences
     (:func:`analysis.faults.compare_runs`, as for the kill campaign), plus the launcher, wall
     times, particle balance and the roller's end."""
-    names = [p.name for p in sorted(Path(slurm_runs).glob("U*_w*_r*"))]
+    names = [p.name for p in sorted(Path(slurm_runs).glob("U*_w*_r*"))
+             if (p / "health.json").is_file() and (Path(local_runs) / p.name / "health.json").is_file()]
     runs = compare_runs(slurm_runs, local_runs, names, tolerance)
     rows = []
     for name in names:
@@ -146,7 +148,18 @@ def main(argv=None):
                         "it must need several minutes but fewer than about --limit-retries")
     parser.add_argument("--limit-checkpoints", type=int, default=20, help="its checkpoints_per_run")
     parser.add_argument("--limit-retries", type=int, default=8, help="Snakemake's --retries for it")
+    parser.add_argument("--dry-run", action="store_true", help="only check that the phases' Snakemake commands "
+                        "resolve (snakemake -n; no cluster, no SLURM tools needed), then exit")
     args = parser.parse_args(argv)
+    try:
+        U, omega = (float(v) for v in args.limit_point.split(":"))
+    except ValueError:
+        parser.error(f"--limit-point {args.limit_point!r}: give U:omega in mm/s:rad/s, e.g. 100:-5")
+    limited_run = f"U{U:g}_w{omega:g}_r0"
+    limited_target = f"results/smoke/runs/{limited_run}/metrics.json"  # its spread, then its layer metrics
+    limited_config = {"smoke": {**RANKS["smoke"], "runtime_min": 1, "checkpoints_per_run": args.limit_checkpoints}}
+    if args.dry_run:
+        return dry_run(limited_target, limited_config, args.limit_retries)
     # a SIGTERM (or SIGINT, which a background job ignores) unwinds: every daemon is stopped on the way out
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     missing = missing_commands(accounting=True)
@@ -154,10 +167,6 @@ def main(argv=None):
         print(f"error: {', '.join(missing)} not found: apt-get install slurm-wlm munge libpmix-dev slurmdbd "
               "mariadb-server", file=sys.stderr)
         return 2
-    U, omega = (float(v) for v in args.limit_point.split(":"))
-    limited_run = f"U{U:g}_w{omega:g}_r0"
-    limited_target = f"results/smoke/runs/{limited_run}/metrics.json"  # its spread, then its layer metrics
-    limited_config = {"smoke": {**RANKS["smoke"], "runtime_min": 1, "checkpoints_per_run": args.limit_checkpoints}}
     scratch = args.scratch or Path(tempfile.mkdtemp(prefix="spreadmap-slurm-"))
     slurm_wd, local_wd, fail_wd, fail_noacct_wd = (scratch / n for n in ("slurm", "local", "fail", "fail-noacct"))
     tolerance = two_run_tolerance(pooled_seed_sd(pd.read_csv(ROOT / "benchmarks/measured/noise_smoke.csv")))
@@ -230,6 +239,28 @@ def main(argv=None):
     return 1 if failed else 0
 
 
+def dry_run(limited_target, limited_config, retries):
+    """``snakemake -n`` of phases 2, 3 and 5 in a scratch folder: the workflow through
+    ``profiles/slurm``, the time-limited spread (a point outside the sweep, asked for by its
+    path) and the local reference. Returns 0 if each resolves, else 1 (its output's tail printed)."""
+    phases = {
+        "2. workflow through profiles/slurm": ("--config", f"fidelity={json.dumps(RANKS)}"),
+        "3. time-limited spread": ("--config", f"fidelity={json.dumps(limited_config)}", "--retries", str(retries),
+                                   "--", limited_target),
+        "5. local reference": ("--config", f"fidelity={json.dumps(RANKS)}", "--", "all", limited_target),
+    }
+    failed = 0
+    with tempfile.TemporaryDirectory(prefix="spreadmap-slurm-dry-") as tmp:
+        for name, extra in phases.items():
+            cmd = snakemake(Path(tmp), "-n", *extra, profile=not name.startswith("5."))
+            proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
+            failed += proc.returncode != 0
+            print(f"{name}: {'resolves' if proc.returncode == 0 else 'FAILED'}", flush=True)
+            if proc.returncode:
+                print("\n".join((proc.stdout + proc.stderr).strip().splitlines()[-10:]), flush=True)
+    return 1 if failed else 0
+
+
 def evaluate(out, table, slurm_wd, limited_run):
     """The benchmark's checks, by name: True where passed."""
     checks = {"SLURM workflow finished (exit 0) with the maps": (
@@ -246,9 +277,10 @@ def evaluate(out, table, slurm_wd, limited_run):
             s is not None and s <= SEEN_WITHIN_S for s in lat)
         checks[f"{name}: the rule's error names the launcher and the fix"] = (
             "MPI could not start" in f["rule_error"] and "'srun'" in f["rule_error"] and "Fix:" in f["rule_error"])
-    data = pd.read_csv(slurm_wd / "results/smoke/dataset.csv")
-    checks["dataset.csv from SLURM has the 6 runs"] = len(data) == 6
-    checks["every SLURM run within 4 sds of a two-run difference of its local twin"] = bool(table.within_4_sd.all())
+    dataset = slurm_wd / "results/smoke/dataset.csv"
+    checks["dataset.csv from SLURM has the 6 runs"] = dataset.is_file() and len(pd.read_csv(dataset)) == 6
+    checks["every SLURM run within 4 sds of a two-run difference of its local twin"] = (
+        len(table) > 0 and bool(table.within_4_sd.all()))
     limited = table[table.run == limited_run]
     if len(limited):
         limited = limited.iloc[0]
@@ -257,7 +289,8 @@ def evaluate(out, table, slurm_wd, limited_run):
             bool(limited.roller_end_dm < 1e-6 and limited.particles_balance == 0 and limited.lost == 0))
     else:
         checks["time-limited spread resumed from a checkpoint"] = False
-    checks["SLURM spreads launched with srun --mpi=pmix"] = bool((table.slurm_launcher == "srun --mpi=pmix").all())
+    checks["SLURM spreads launched with srun --mpi=pmix"] = (
+        len(table) > 0 and bool((table.slurm_launcher == "srun --mpi=pmix").all()))
     checks["no half-written file"] = half_written_files(slurm_wd / "results") == []
     return checks
 
@@ -307,7 +340,8 @@ def write(out, checks, table, tolerance):
         "",
         table[["run", "slurm_launcher", "resumed_from_step", "steps", "particles_balance", "roller_end_dm",
                "bit_identical", "slurm_wall_s",
-               "local_wall_s", *[f"d_{k}" for k in METRICS], "within_4_sd"]].to_markdown(index=False, floatfmt=".3g"),
+               "local_wall_s", *[f"d_{k}" for k in METRICS], "within_4_sd"]].to_markdown(index=False, floatfmt=".3g")
+        if len(table) else "(no run finished both on SLURM and locally)",
         "",
     ]
     (dest / "slurm.md").write_text("\n".join(lines))

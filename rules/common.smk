@@ -1,7 +1,10 @@
 # Shared by every rule file: the checked configuration, the fidelity level and the runs.
 from analysis.metrics.deposit import profile_runs as deposit_profile_runs
+from analysis.rule import by_folder
 from analysis.config import (
     ConfigError,
+    find_heap,
+    find_run,
     heap_config,
     heaps_by_name,
     load_config,
@@ -50,6 +53,17 @@ TOP_VIEWS = [f"{OUT}/top_views/{FIRST_RUNS[(_U_MAX, w, 0)]}.png" for w in _OMEGA
 
 # The heap folder each run starts from.
 HEAP_OF = {name: run.heap for name, run in RUN_TABLE.items()}
+
+
+# The run of a folder under runs/ (and the first run of a heap folder): the sweep's, or a point
+# outside it asked for by its path (results/<level>/runs/U100_w-7_r0/metrics.json), checked as a
+# swept point; else one line naming the folder.
+run_of = by_folder(find_run, CONFIG, RUN_TABLE, workflow.basedir)
+heap_of = by_folder(find_heap, CONFIG, HEAP_TABLE, workflow.basedir)
+
+
+# A user's substrate mesh is an input of the geometry (its content is in the fingerprints too).
+USER_MESH = [str(Path(workflow.basedir) / CONFIG["substrate"]["mesh"])] if CONFIG["substrate"]["mesh"] else []
 
 
 wildcard_constraints:

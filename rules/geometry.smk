@@ -1,5 +1,7 @@
 rule geometry:
     """Rough substrate (a new realisation per replicate, or the user's STL) and roller meshes of one heap."""
+    input:
+        USER_MESH,
     output:
         substrate=f"{OUT}/meshes/{{heap}}/substrate.stl",
         roller=f"{OUT}/meshes/{{heap}}/roller.stl",
@@ -12,7 +14,10 @@ rule geometry:
     params:
         level=LEVEL,
         physics=lambda wc: simulation_fingerprint(
-            heap_config(CONFIG, HEAP_TABLE[wc.heap]), LEVEL, sections=("roller", "substrate")
+            heap_config(CONFIG, heap_of(wc.heap)),
+            LEVEL,
+            sections=("roller", "substrate"),
+            base_dir=workflow.basedir,
         ),
     script:
         "../scripts/geometry.py"

@@ -2,7 +2,7 @@ rule layer_metrics:
     """The paper's eqs. 1-7 from the final dump, by the virtual profilometer; the layer as VTK for ParaView."""
     input:
         dump=rules.spread.output.dump,
-        substrate=lambda wc: f"{OUT}/meshes/{HEAP_OF[wc.run]}/substrate.stl",
+        substrate=lambda wc: f"{OUT}/meshes/{run_of(wc.run).heap}/substrate.stl",
     output:
         metrics=f"{OUT}/runs/{{run}}/metrics.json",
         vtk=f"{OUT}/runs/{{run}}/final.vtp",  # here, not in a rule of its own: one Python start per run

@@ -19,7 +19,9 @@ rule settle:
         mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
     params:
         level=LEVEL,
-        physics=lambda wc: simulation_fingerprint(heap_config(CONFIG, HEAP_TABLE[wc.heap]), LEVEL),
+        physics=lambda wc: simulation_fingerprint(
+            heap_config(CONFIG, heap_of(wc.heap)), LEVEL, base_dir=workflow.basedir
+        ),
     script:
         "../scripts/settle.py"
 
@@ -27,10 +29,10 @@ rule settle:
 rule spread:
     """One spreading pass at U [mm/s] and omega [rad/s] (and the run's extra axes' values) from its settled heap."""
     input:
-        substrate=lambda wc: f"{OUT}/meshes/{HEAP_OF[wc.run]}/substrate.stl",
-        roller_shell=lambda wc: f"{OUT}/meshes/{HEAP_OF[wc.run]}/roller_shell.stl",
-        restart=lambda wc: f"{OUT}/settle/{HEAP_OF[wc.run]}/settled.restart",
-        settled=lambda wc: f"{OUT}/settle/{HEAP_OF[wc.run]}/settled.dump",
+        substrate=lambda wc: f"{OUT}/meshes/{run_of(wc.run).heap}/substrate.stl",
+        roller_shell=lambda wc: f"{OUT}/meshes/{run_of(wc.run).heap}/roller_shell.stl",
+        restart=lambda wc: f"{OUT}/settle/{run_of(wc.run).heap}/settled.restart",
+        settled=lambda wc: f"{OUT}/settle/{run_of(wc.run).heap}/settled.dump",
     output:
         dump=f"{OUT}/runs/{{run}}/final.dump",
         health=f"{OUT}/runs/{{run}}/health.json",
@@ -47,7 +49,7 @@ rule spread:
         mem_mb_per_cpu=SCENE.mem_mb_per_rank,  # SLURM: --mem-per-cpu, one CPU per rank
     params:
         level=LEVEL,
-        physics=lambda wc: simulation_fingerprint(run_config(CONFIG, RUN_TABLE[wc.run]), LEVEL),
+        physics=lambda wc: simulation_fingerprint(run_config(CONFIG, run_of(wc.run)), LEVEL, base_dir=workflow.basedir),
     script:
         "../scripts/spread.py"
 
@@ -59,6 +61,9 @@ rule run_parameters:
     log:
         f"{LOGS}/run_parameters.log",
     params:
-        physics=[simulation_fingerprint(run_config(CONFIG, run), LEVEL) for run in RUN_TABLE.values()],
+        physics=[
+            simulation_fingerprint(run_config(CONFIG, run), LEVEL, base_dir=workflow.basedir)
+            for run in RUN_TABLE.values()
+        ],
     script:
         "../scripts/run_parameters.py"

@@ -2,11 +2,14 @@
 cross-validation fitted on the same training points, its intervals calibrated on its
 held-out predictions; write model, scores, split, grid."""
 
+import sys
+
 import pandas as pd
 
 from analysis.io import atomic_path, write_json
 from analysis.rule import rule_context
 from analysis.surrogate.data import split_table
+from analysis.surrogate.intervals import unbounded_warning
 from analysis.surrogate.network import fit_surrogate, format_spread, test_r_spread
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import predict_grid
@@ -36,5 +39,9 @@ with rule_context(snakemake):
     span = scores["input_range"]
     extra = {c: scores["swept"][c] for c in list(scores["inputs"])[2:]}  # at each swept value of the other axes
     grid = predict_grid(model, span["U_mm_s"], span["omega_rad_s"], snakemake.params.grid_points, extra=extra)
+    warning = unbounded_warning(grid, model.n_runs, model.confidence)
+    if warning:  # in the log and on the workflow's screen
+        print(warning)
+        print(f"rule surrogate: {warning}", file=sys.__stderr__, flush=True)
     with atomic_path(out.grid) as tmp:
         grid.to_csv(tmp, index=False)

@@ -1,13 +1,13 @@
 """Snakemake entry: write one heap's substrate and roller meshes (its replicate and heap-changing values)."""
 from pathlib import Path
 
-from analysis.config import heap_config, heaps_by_name
+from analysis.config import PROJECT_DIR, find_heap, heap_config
 from analysis.dem.simulate import make_geometry
 from analysis.io import write_json
 from analysis.rule import rule_context
 
 with rule_context(snakemake) as config:
-    run = heaps_by_name(config)[snakemake.wildcards.heap]
+    run = find_heap(config, snakemake.wildcards.heap, base_dir=PROJECT_DIR)
     summary = make_geometry(heap_config(config, run), snakemake.params.level, Path(snakemake.output.substrate).parent,
                             base_dir=Path(snakemake.scriptdir).parent, replicate=run.replicate)
     write_json(summary, snakemake.output.summary)

@@ -1,6 +1,6 @@
 """Snakemake entry: the paper's layer metrics (eqs. 1-7) of one run, and its final state as VTK."""
 
-from analysis.config import run_config, runs_by_name, scene
+from analysis.config import PROJECT_DIR, find_run, run_config, scene
 from analysis.io import write_json
 from analysis.metrics.dump import read_dump
 from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
@@ -8,7 +8,7 @@ from analysis.rule import rule_context
 from analysis.viz.views import write_vtk
 
 with rule_context(snakemake) as config:
-    run = runs_by_name(config)[snakemake.wildcards.run]
+    run = find_run(config, snakemake.wildcards.run, base_dir=PROJECT_DIR)
     s = scene(run_config(config, run), snakemake.params.level)
     frame = read_dump(snakemake.input.dump)
     metrics = spread_layer_metrics(frame, s.sampling_region, run.U * 1e-3, s.density,

@@ -2,10 +2,10 @@
 
 import yaml
 
-from analysis.config import run_parameters, sweep_runs
+from analysis.config import PROJECT_DIR, run_parameters, sweep_runs
 from analysis.io import write_text
 from analysis.rule import rule_context
 
 with rule_context(snakemake) as config:
     for run, path in zip(sweep_runs(config), snakemake.output, strict=True):
-        write_text(yaml.safe_dump(run_parameters(config, run), sort_keys=False), path)
+        write_text(yaml.safe_dump(run_parameters(config, run, PROJECT_DIR), sort_keys=False), path)

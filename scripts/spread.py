@@ -1,11 +1,11 @@
 """Snakemake entry: one spreading pass at the run's U [mm/s] and omega [rad/s], its extra axes' values in place."""
 from pathlib import Path
 
-from analysis.config import run_config, runs_by_name
+from analysis.config import PROJECT_DIR, find_run, run_config
 from analysis.dem.simulate import spread
 from analysis.rule import rule_context
 
 with rule_context(snakemake) as config:
-    run = runs_by_name(config)[snakemake.wildcards.run]
+    run = find_run(config, snakemake.wildcards.run, base_dir=PROJECT_DIR)
     spread(run_config(config, run), snakemake.params.level, run.U, run.omega, Path(snakemake.input.substrate).parent,
            Path(snakemake.input.restart).parent, Path(snakemake.output.dump).parent, replicate=run.replicate)

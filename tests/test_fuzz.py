@@ -1,7 +1,8 @@
-"""Property-based tests (hypothesis): mutated configs against the config check, mutated
-dumps against the dump reader and the ``layer_metrics`` command line. Each input gives
-a result or a one-line error naming the key or the file: never a traceback, never a
-half-written output.
+"""Property-based tests (hypothesis): mutated configs (values, whole-number floats and huge
+numbers among them, and the YAML text of a config file or a ``--config`` argument) against the
+config check, mutated dumps (plain and gzip) against the dump reader and the ``layer_metrics``
+command line. Each input gives a result or a one-line error naming the key or the file: never
+a traceback, never a half-written output.
 
 Seeded (``derandomize``) and bounded, so ``make test`` stays fast; the example count
 per test is ``FUZZ_EXAMPLES`` (default 150). ``benchmarks/bench_fuzz.py`` runs more and
@@ -9,6 +10,7 @@ records how many cases were tried (benchmarks/measured/fuzz.md).
 """
 import contextlib
 import copy
+import gzip
 import io
 import json
 import math
@@ -21,7 +23,7 @@ import yaml
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from analysis.config import ConfigError, load_config, scene
+from analysis.config import ConfigError, coerce_cli_values, load_config, scene, sweep_runs
 from analysis.metrics.dump import DumpError, read_dump, write_dump
 from analysis.metrics.profilometer import main as layer_metrics_main
 from tests.test_config import ROOT
@@ -51,6 +53,7 @@ BAD_VALUES = st.one_of(
     st.none(), st.booleans(), st.just(float("nan")), st.just(float("inf")), st.just(float("-inf")),
     st.integers(-10**30, 10**30), st.floats(allow_nan=True, allow_infinity=True),
     st.sampled_from([0, -1, 0.0, -0.5, 1e308, 1e-308, 10**6, "", "x", "nan", "70 mm/s"]),
+    st.sampled_from([1.0, 2.0, 3.0, 90.0, 300.0, 1e9, 1e12, 10**9, 100000, 1e-6, 1e-12, "yes", "1e9"]),
     st.lists(st.integers(-5, 5), max_size=3),
     st.dictionaries(st.sampled_from(["a", "U_mm_s"]), st.integers(), max_size=2),
 )
@@ -108,11 +111,81 @@ def test_mutated_config_is_accepted_or_refused_by_key(mutations):
                    for kind, path, value in mutations), (mutations, message)
         return
     event("config accepted")
-    # accepted: the scene of every level is finite
+    _accepted_is_sound(checked)
+
+
+def _accepted_is_sound(checked):
+    """An accepted config: the scene of every level is finite, its counts are integers, its runs listable."""
     for level in checked["fidelity"]:
         s = scene(checked, level)
         assert all(math.isfinite(v) for v in (*s.box, s.timestep, s.strip_width, *s.sampling_region)), level
         assert s.timestep > 0 and s.heap_particles > 0
+        assert isinstance(s.heap_particles, int) and isinstance(s.roller_facets, int)
+    assert isinstance(checked["sweep"]["replicates"], int) and isinstance(checked["random_seed"], int)
+    assert sweep_runs(checked)
+
+
+TEXT = (ROOT / "config.yaml").read_text()
+YAML_CHARS = st.sampled_from(list("[]{}:,\"'\t-#&*!|>%@? \n") + ["1e9", "2.0", "yes", "- x", ": y", "\\"])
+TEXT_MUTATION = st.tuples(st.sampled_from(["insert", "delete", "replace", "truncate", "indent", "duplicate_line"]),
+                          st.integers(0, len(TEXT)), YAML_CHARS)
+
+
+def _mutate_text(text: str, kind: str, k: int, chars: str) -> str:
+    k %= len(text) + 1
+    if kind == "insert":
+        return text[:k] + chars + text[k:]
+    if kind == "delete":
+        return text[:k] + text[k + len(chars):]
+    if kind == "replace":
+        return text[:k] + chars + text[k + len(chars):]
+    if kind == "truncate":
+        return text[:k]
+    lines = text.split("\n")
+    i = k % len(lines)
+    if kind == "indent":
+        lines[i] = chars[:1].replace("\n", " ") + lines[i]
+    else:
+        lines.insert(i, lines[i])
+    return "\n".join(lines)
+
+
+@FUZZ
+@given(mutations=st.lists(TEXT_MUTATION, min_size=1, max_size=3))
+def test_mutated_config_file_is_accepted_or_refused_by_file_or_key(tmp_path_factory, mutations):
+    text = TEXT
+    for mutation in mutations:
+        text = _mutate_text(text, *mutation)
+    path = tmp_path_factory.mktemp("yaml") / "config.yaml"
+    path.write_text(text)
+    try:
+        checked = load_config(path)
+    except ConfigError as err:
+        message = str(err)
+        event("YAML error, named by file" if message.startswith(str(path)) else "config refused by key")
+        assert "\n" not in message, message
+        assert message.startswith(str(path)) or message.startswith("config key"), message
+        return
+    event("config accepted")
+    _accepted_is_sound(checked)
+
+
+@FUZZ
+@given(section=st.sampled_from(["sweep", "surrogate", "roller", "fidelity"]), mutation=TEXT_MUTATION)
+def test_mutated_config_argument_is_accepted_or_refused_by_argument_or_key(section, mutation):
+    argument = _mutate_text(json.dumps(BASE[section]), *mutation)   # --config <section>='<flow YAML>'
+    config = copy.deepcopy(BASE)
+    try:
+        config[section] = coerce_cli_values({section: argument})[section]
+        checked = load_config(config, base_dir=ROOT)
+    except ConfigError as err:
+        message = str(err)
+        event("YAML error, named by argument" if message.startswith("--config") else "config refused by key")
+        assert "\n" not in message, message
+        assert message.startswith((f"--config {section}=", "config key")), message
+        return
+    event("config accepted")
+    _accepted_is_sound(checked)
 
 
 # ------------------------------------------------------------------ dumps
@@ -166,11 +239,17 @@ def _mutate(text: bytes, kind: str, k: int, value: str) -> bytes:
     if kind == "header_line":
         lines[k % 9] = value
         return "\n".join(lines).encode()
+    packed = gzip.compress(text, mtime=0)
+    if kind == "gzip_flip":  # one byte of the compressed file flipped
+        i = k % len(packed)
+        return packed[:i] + bytes([packed[i] ^ (1 + k % 255)]) + packed[i + 1:]
+    if kind == "gzip_truncate":
+        return packed[: k % len(packed)]
     raise AssertionError(kind)
 
 
 DUMP_MUTATION = st.tuples(
-    st.sampled_from(["truncate", "duplicate_id", "value", "count", "header_line"]),
+    st.sampled_from(["truncate", "duplicate_id", "value", "count", "header_line", "gzip_flip", "gzip_truncate"]),
     st.integers(0, 10**6),
     st.sampled_from(["nan", "inf", "-inf", "1e308", "-1", "0", "x", "", "1e999", "99999999999999999999",
                      "1000000000000", "-5", "ITEM: ATOMS x y", "4.2e-4"]),

@@ -16,7 +16,8 @@ def test_a_heap_that_runs_dry_is_refused_by_name_unless_kept(tmp_path):
     base = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-d", str(tmp_path),
             "--configfile", str(ROOT / "config.yaml"), "--cores", "2", "results/smoke/dataset.csv", "--config",
             "level=smoke", 'sweep={"U_mm_s": [100], "omega_rad_s": [-10, 0, 5, 10], "replicates": 1}',
-            'surrogate={"n_test": 1}', 'fidelity={"smoke": {"heap_particles": 60, "feed_pile_mg_per_mm": null}}']
+            'surrogate={"n_test": 1, "cv_folds": 4}',
+            'fidelity={"smoke": {"heap_particles": 60, "feed_pile_mg_per_mm": null}}']
     proc = subprocess.run([*base, "keep_supply_limited_runs=false"], capture_output=True, text=True)
     assert proc.returncode != 0
     assert "raise fidelity.smoke.heap_particles" in proc.stderr

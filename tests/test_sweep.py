@@ -98,6 +98,7 @@ def test_explicit_points_over_all_axes(base):
               {"U_mm_s": 85, "omega_rad_s": 10, "roller.gap_um": 300}]
     config = with_sweep(base, points=points, **{"roller.gap_um": [300, 400]})
     config["surrogate"]["n_test"] = 1               # 4 points: 3 to train on
+    config["surrogate"]["cv_folds"] = 4
     config = load_config(config)
     assert [r.name for r in sweep_runs(config)] == [
         "roller.gap_um=350/U70_w-5_r0", "U47.5_w2.5_r0", "roller.gap_um=400/U100_w0_r0", "U85_w10_r0"]
@@ -113,7 +114,7 @@ def test_explicit_points_over_all_axes(base):
     ({"material.poisson_ratio": [0.3, 0.6]}, "'sweep.material.poisson_ratio' = 0.6"),
     ({"fidelity.default.heap_particles": [300, 100.5]}, "'sweep.fidelity.default.heap_particles' = 100.5"),
     ({"roller.gap_um": [300, 80]}, "'sweep.roller.gap_um' = 80"),
-    ({"roller.gap_um": [300, 50000]}, "outside the simulation box"),
+    ({"roller.gap_um": [300, 9000]}, "outside the simulation box"),
     ({"surrogate.alpha": [0.1]}, "'sweep.surrogate.alpha'"),
     ({"substrate.seed": [1, 2]}, "sweep.replicates varies the seeds"),
     ({"fidelity.smoke.heap_particles": [100]}, "names fidelity level 'smoke', but level is 'default'"),

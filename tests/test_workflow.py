@@ -85,6 +85,7 @@ def test_dataset_has_one_sane_row_per_run(workflow):
     assert not data.heap_exhausted.any() and np.all(data.supply_margin > 0.05)
     assert np.all(data.fed_particles[data.omega_rad_s < 0] > data.fed_particles[data.omega_rad_s > 0].max())
     assert np.all((data.cpu_s > 0) & (data.cpu_s <= 1.05 * data.wall_s))  # one rank: CPU within the wall time
+    assert (data.resumed_from_step == 0).all()                            # none was interrupted
 
 
 def test_random_kills_lose_nothing(workflow, tmp_path):
@@ -138,6 +139,9 @@ def test_surrogate_scores_maps_and_grid_are_made(workflow):
         assert all(abs(s["R"]) <= 1 + 1e-9 for s in scores[part].values() if s["R"] is not None), part
     grid = pd.read_csv(out / "surrogate/grid.csv")
     assert {"U_mm_s", "omega_rad_s", "throughput_index", "defect_index"} <= set(grid.columns)
+    if np.isinf(grid.select_dtypes("number").to_numpy()).any():   # too few runs to calibrate: said so
+        log = (workflow / "results/logs/smoke/surrogate.log").read_text()
+        assert "interval columns of the grid are infinite" in log
     # the grid spans the swept speeds; the indices are products of two ratios to the grid's maxima
     assert (grid.U_mm_s.min(), grid.U_mm_s.max()) == (min(FIRST_U), max(FIRST_U))
     assert (grid.omega_rad_s.min(), grid.omega_rad_s.max()) == (min(OMEGAS), max(OMEGAS))

@@ -158,13 +158,18 @@ def load_surface(path: str | Path) -> trimesh.Trimesh:
     Only its triangles are kept (a profilometer scan exported as a triangulated
     surface); quads are split in two. An STL is read by trimesh (meshio 5.3
     misreads some ASCII STLs). Raises ``ValueError`` naming the file if it
-    cannot be read or holds no triangle or quad.
+    cannot be read (empty, truncated, not a mesh), holds no triangle or quad, or has a
+    vertex that is not a finite number.
     """
     if Path(path).suffix.lower() == ".stl":
         try:
-            return load_stl(path)
+            mesh = load_stl(path)
         except Exception as err:
             raise ValueError(f"cannot read the surface mesh {str(path)!r}: {err}") from None
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            raise ValueError(f"the surface mesh {str(path)!r} holds no triangles (an empty, truncated or "
+                             "unreadable STL)")
+        return _finite(mesh, path)
     try:
         mesh = meshio.read(str(path))
     except Exception as err:  # meshio raises its own ReadError, and OS and format errors
@@ -175,4 +180,31 @@ def load_surface(path: str | Path) -> trimesh.Trimesh:
     if not faces:
         raise ValueError(f"the surface mesh {str(path)!r} holds no triangles or quads "
                          f"(cells: {', '.join(b.type for b in mesh.cells) or 'none'})")
-    return trimesh.Trimesh(np.asarray(mesh.points, float)[:, :3], np.concatenate(faces), process=False)
+    return _finite(trimesh.Trimesh(np.asarray(mesh.points, float)[:, :3], np.concatenate(faces), process=False), path)
+
+
+#: A mesh whose extent is this many times what it should cover, or whose heights span more than
+#: the box is high, is in the wrong units (mm or um for m: 1000 x, 1e6 x).
+UNITS_FACTOR = 30
+
+
+def units_slip(mesh: trimesh.Trimesh, extent, height: float) -> str | None:
+    """What says that ``mesh`` is not in metres: its x-y extent over ``UNITS_FACTOR`` x ``extent``
+    (x, y [m], what it covers) or its heights spanning more than ``height`` [m]; None if nothing."""
+    span = mesh.bounds[1] - mesh.bounds[0]
+    ratio = float(np.max(span[:2] / np.asarray(extent, float)))
+    if ratio > UNITS_FACTOR:
+        return f"spans {span[0]:.4g} x {span[1]:.4g} m, {ratio:.0f} x the {extent[0]:.4g} x {extent[1]:.4g} m it covers"
+    if span[2] > height:
+        return f"has heights spanning {span[2]:.4g} m, more than the {height:.4g} m box is high"
+    return None
+
+
+def _finite(mesh: trimesh.Trimesh, path) -> trimesh.Trimesh:
+    """``mesh`` if every vertex of its triangles is finite; else a ValueError naming the file and one vertex."""
+    used = mesh.vertices[np.unique(mesh.faces)]
+    bad = ~np.isfinite(used).all(axis=1)
+    if bad.any():
+        raise ValueError(f"the surface mesh {str(path)!r} has {bad.sum()} vertices that are not finite numbers "
+                         f"(e.g. {used[bad][0].tolist()})")
+    return mesh

@@ -15,12 +15,14 @@ runs an input file and prints its health as JSON.
 from __future__ import annotations
 
 import argparse
+import errno
 import functools
 import json
 import os
 import re
 import resource
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -265,12 +267,20 @@ def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str |
     if prefix and proc.returncode != 0 and "LIGGGHTS (Version" not in log_text:  # died before its first line
         raise MpiStartError(f"MPI could not start {ranks} LIGGGHTS ranks with '{' '.join(prefix)}' ({source}): "
                             f"{_mpi_reason(screen_text)}. Fix: {MPI_FIX}")
+    check_disk(input_file.parent, log_text + screen_text)
+    killed = _signal_of(proc.returncode, error)
+    if killed:
+        raise LiggghtsError(f"LIGGGHTS on {input_file.name} was killed by {killed}; run folder: {input_file.parent}")
     if "SIGINT/SIGTERM caught" in screen_text + log_text:  # LIGGGHTS' own handler: restart file, then exit 0
         raise LiggghtsError(f"LIGGGHTS on {input_file.name} was stopped by SIGTERM or SIGINT (a time limit, "
                             f"scancel or a kill) and quit before its end (exit code {proc.returncode}); "
                             f"full log: {log_file}")
     if proc.returncode != 0 or error:
         where = _failing_command(log_text)
+        known = next((why for pattern, why in KNOWN_ERRORS.items() if error and re.search(pattern, error)), None)
+        if known:
+            raise LiggghtsError(f"LIGGGHTS failed on {input_file.name}: {known.format(**_error_fields(error))} "
+                                f"({error}); run folder: {input_file.parent}")
         tail = "\n".join(screen_text.strip().splitlines()[-8:])
         raise LiggghtsError(
             f"LIGGGHTS failed on {input_file.name} (exit code {proc.returncode})\n"
@@ -283,6 +293,53 @@ def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str |
     parsed["ranks"] = ranks
     parsed["launcher"] = " ".join(prefix)
     return parsed
+
+
+#: LIGGGHTS' ERROR lines the wrapper can foresee, and what to change (config keys or files).
+KNOWN_ERRORS = {
+    r"Mesh \(id roller\S*\).*lost / left the domain":
+        "the roller mesh left the simulation box (its facets outside were deleted): check roller.diameter_mm, "
+        "roller.gap_um and the speeds (sweep.U_mm_s, sweep.omega_rad_s)",
+    r"Mesh \(id substrate\).*lost / left the domain":
+        "the substrate mesh lies outside the simulation box (its facets outside were deleted): check "
+        "substrate.mesh (metres, mean plane near z = 0), substrate.sq_um and roller.gap_um",
+    r"Invalid run command":
+        "a run command out of range (its number of time steps): check timestep.rayleigh_fraction, the speeds "
+        "(sweep.U_mm_s) and the level's settle_time_s and rest_time_s",
+    r"Cannot open (?:mesh |restart )?file (?P<file>\S+?)\.?(?:\s|$)":
+        "LIGGGHTS cannot open {file}: run the step that makes it (geometry before settle, settle before spread)",
+}
+
+#: Free bytes below which a failed or truncated run is put down to a full disk.
+FULL_DISK_BYTES = 1 << 20
+
+
+def check_disk(folder: str | Path, output: str = "") -> None:
+    """Raise ``OSError(ENOSPC)`` naming ``folder`` if its disk is full (under :data:`FULL_DISK_BYTES`
+    free) or LIGGGHTS' ``output`` says so: LIGGGHTS writes on a full disk without a word, leaving
+    truncated dumps and restarts."""
+    free = shutil.disk_usage(folder).free
+    if free < FULL_DISK_BYTES or "No space left on device" in output:
+        raise OSError(errno.ENOSPC, f"No space left on device ({free} bytes free; LIGGGHTS' output there is "
+                                    "incomplete: free space and run again)", str(folder))
+
+
+def _signal_of(returncode: int, error: str | None) -> str | None:
+    """'SIGKILL (signal 9, e.g. ...)' for a return code that says a signal stopped the process
+    (negative: Python's; 128 + n: a launcher's), else None."""
+    number = -returncode if returncode < 0 else returncode - 128 if returncode > 128 and not error else 0
+    try:
+        name = signal.Signals(number).name
+    except ValueError:
+        return None
+    why = {"SIGKILL": "the out-of-memory killer, a time limit or kill -9", "SIGXFSZ": "a file-size limit",
+           "SIGSEGV": "a crash of the engine", "SIGBUS": "a crash of the engine"}.get(name, "a kill")
+    return f"{name} (signal {number}, e.g. {why})"
+
+
+def _error_fields(error: str) -> dict:
+    match = re.search(r"Cannot open (?:mesh |restart )?file (\S+?)\.?(?:\s|$)", error)
+    return {"file": match.group(1) if match else "a file"}
 
 
 @functools.cache

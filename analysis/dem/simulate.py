@@ -13,8 +13,10 @@ Command line (the workflow's rules call the same functions)::
 from __future__ import annotations
 
 import argparse
+import errno
 import hashlib
 import json
+import math
 import os
 import shutil
 import sys
@@ -23,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.config import PEAK_CAP, ConfigError, Scene, load_config, scene
+from analysis.config import MAX_RUN_STEPS, PEAK_CAP, ConfigError, Scene, load_config, scene
 from analysis.dem import geometry
 from analysis.dem.health import (
     MAX_STRAYS,
@@ -85,7 +87,9 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
             raise ConfigError(f"config key 'substrate.mesh': {err}") from None
         lo, hi = substrate.bounds
         need = (s.substrate_x[0], s.substrate_x[1], 0.0, s.strip_width)
-        if lo[0] > need[0] or hi[0] < need[1] or lo[1] > 1e-9 or hi[1] < s.strip_width - 1e-9:
+        _check_units(substrate, s)
+        if lo[0] > need[0] + COVER_TOL or hi[0] < need[1] - COVER_TOL or lo[1] > COVER_TOL or \
+                hi[1] < s.strip_width - COVER_TOL:
             raise ConfigError(f"config key 'substrate.mesh' = {s.substrate['mesh']!r}: "
                               f"covers x {lo[0]:.4g}..{hi[0]:.4g} m,"
                               f" y {lo[1]:.4g}..{hi[1]:.4g} m; the bed needs x {need[0]:.4g}..{need[1]:.4g},"
@@ -119,6 +123,36 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
             "substrate_peak_m": float(peak), "substrate_triangles": len(substrate.faces)}
 
 
+#: How far [m] a user's mesh may fall short of the bed's edges: float32 rounding (binary STL,
+#: PLY) moves them by nanometres.
+COVER_TOL = 1e-7
+
+
+def _check_units(substrate, s: Scene) -> None:
+    """A ConfigError if the user's mesh looks like millimetres or micrometres, not metres
+    (:func:`geometry.units_slip` against the bed and the simulation box)."""
+    slip = geometry.units_slip(substrate, (s.substrate_x[1] - s.substrate_x[0], s.strip_width), s.box[5] - s.box[4])
+    if slip:
+        raise ConfigError(f"config key 'substrate.mesh' = {s.substrate['mesh']!r}: {slip}: in millimetres or "
+                          "micrometres? the mesh must be in metres")
+
+
+def ran(log: dict, input_file: Path) -> dict:
+    """``log`` if LIGGGHTS ran time steps (printed thermo rows); else a LiggghtsError naming the run folder."""
+    if log["thermo"].empty or "KinEng" not in log["thermo"]:
+        raise LiggghtsError(f"LIGGGHTS on {input_file.name} exited 0 without running a time step (no thermo "
+                            f"output in its log); run folder: {input_file.parent}")
+    return log
+
+
+def need_files(*files) -> None:
+    """Raise FileNotFoundError (``<file>: No such file or directory (<what>)``) for the first of
+    ``(path, what)`` that is not a file: before LIGGGHTS, which would end in an MPI_ABORT."""
+    for path, what in files:
+        if not Path(path).is_file():
+            raise FileNotFoundError(errno.ENOENT, f"No such file or directory ({what})", str(path))
+
+
 def _publish(out: Path, summary: dict, *names: str) -> None:
     """Rename the run's ``<name>.part`` files to ``<name>``, then write
     ``health.json``: a run killed or refused earlier leaves nothing that looks finished."""
@@ -135,9 +169,10 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     ``max_steps`` cuts each settling phase to that many steps: a start-up check
     of a big scene (benchmarks/bench_scaling.py), not a settled heap."""
     s, out, meshes = scene(config, level), Path(outdir), Path(meshes).resolve()
-    out.mkdir(parents=True, exist_ok=True)
     if s.timestep > s.max_rayleigh_fraction * s.rayleigh_time:
         raise LiggghtsError(f"time step {s.timestep:.3g} s exceeds the allowed fraction of the Rayleigh time")
+    need_files((meshes / "substrate.stl", "the geometry step's substrate: --meshes"))
+    out.mkdir(parents=True, exist_ok=True)
     text = render("settle.in.j2", s=s, contact=contact_model(s), seeds=seeds(config, s, replicate),
                   box=[f"{v:.6g}" for v in s.box],
                   processors=processors_grid(s),
@@ -148,7 +183,7 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
                   restart="settled.restart.part", dump="settled.dump.part",
                   stray_x=s.sampling_region[0] - max(s.diameters), max_strays=MAX_STRAYS)
     (out / "settle.in").write_text(text)
-    log = run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks)
+    log = ran(run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks), out / "settle.in")
     _check_timestep(log, s)
     peak = check_kinetic_energy(log, squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
     if log["inserted"] != s.heap_particles:
@@ -259,9 +294,14 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     """
     s, out = scene(config, level), Path(outdir)
     meshes, settled = Path(meshes).resolve(), Path(settled).resolve()
+    if not (math.isfinite(U_mm_s) and U_mm_s > 0 and math.isfinite(omega_rad_s)):
+        raise ConfigError(f"spreader speeds U = {U_mm_s} mm/s, omega = {omega_rad_s} rad/s: U must be a positive "
+                          "finite number, omega a finite one")
+    need_files((meshes / "substrate.stl", "the geometry step's substrate: --meshes"),
+               (meshes / "roller_shell.stl", "the geometry step's roller: --meshes"),
+               (settled / "settled.restart", "the settled heap: --settled"),
+               (settled / "settled.dump", "the settled heap: --settled"))
     out.mkdir(parents=True, exist_ok=True)
-    if U_mm_s <= 0:
-        raise ConfigError(f"spreader speed U = {U_mm_s} mm/s must be positive")
     speed = U_mm_s * 1e-3
     substrate = geometry.load_stl(meshes / "substrate.stl")
     peak = float(substrate.vertices[:, 2].max())
@@ -276,6 +316,9 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
         raise LiggghtsError(f"roller start x = {x0:.4g} m puts the roller outside the box (x >= {s.box[0]:.4g} m)")
     travel_time = (s.travel_end - x0) / speed
     travel_steps = ceil(travel_time / s.timestep)
+    if not 1 <= travel_steps <= MAX_RUN_STEPS:
+        raise ConfigError(f"spreader speed U = {U_mm_s:g} mm/s: the travel takes {travel_steps:.3g} time steps of "
+                          f"{s.timestep:.3g} s; a LIGGGHTS run takes 1 to {MAX_RUN_STEPS}")
     unknown = set(skips) - SKIPS
     if unknown:
         raise ValueError(f"unknown skip(s) {sorted(unknown)}; known: {sorted(SKIPS)}")
@@ -333,7 +376,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
             (out / CHECKPOINT_DIR / "input.sha256").write_text(fingerprint)
         (out / "spread.in").write_text(fresh if restart is None else render_from(step, restart))
         try:
-            log = run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks)
+            log = ran(run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks), out / "spread.in")
             break
         except LiggghtsError as err:
             if restart is None:

@@ -28,6 +28,7 @@ import io
 import mmap
 import re
 import warnings
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -158,8 +159,8 @@ def _load_bytes(path: Path):
             try:
                 with gzip.open(path, "rb") as g:
                     return g.read()
-            except (OSError, EOFError) as err:  # truncated or corrupt stream
-                raise DumpError(f"{path}: broken gzip stream ({err})") from err
+            except (OSError, EOFError, zlib.error) as err:  # truncated or corrupt stream
+                raise DumpError(f"{path}: broken gzip stream ({err})") from None
         f.seek(0)
         try:
             return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.dem.geometry import units_slip
 from analysis.io import USER_ERRORS, error_line, write_text
 from analysis.metrics.dump import read_dump
 
@@ -404,6 +405,7 @@ def main(argv=None):
         Exit status: 0 on success, 2 on a bad argument or input file.
     """
     args = _parser().parse_args(argv)
+    args.region_text = [f"{v:g}" for v in args.region]
     try:
         for path in (args.dump, args.substrate):
             if path is not None and not Path(path).is_file():
@@ -414,12 +416,22 @@ def main(argv=None):
         # check in the units given, so that messages quote the user's numbers
         _check_inputs(args.region, args.speed, args.density, args.lines, frame.box * 1e3, unit="mm")
         region = tuple(v * 1e-3 for v in args.region)
+        _check_units(frame, region, args)
         substrate = args.substrate if args.substrate is not None else args.substrate_height * 1e-3
         try:
+            if args.substrate is not None:
+                substrate = _load_mesh(substrate)
+                slip = units_slip(substrate, np.ptp(frame.box[:2], axis=1), float(np.ptp(frame.box[2])))
+                if slip:
+                    raise ValueError(f"substrate {args.substrate} {slip} (the dump's box): in millimetres? "
+                                     "--substrate is in metres")
             metrics = spread_layer_metrics(frame, region, args.speed * 1e-3, args.density, substrate=substrate,
                                            n_lines=args.lines, seed=args.seed)
         except ValueError as err:
             raise ValueError(f"{args.dump}: {err}") from None
+        if metrics["n_particles"] == 0:
+            raise ValueError(f"{args.dump}: no particle is centred in the region {' '.join(args.region_text)} mm "
+                             f"(of {len(frame.atoms)} in the dump): no layer to measure")
         text = json.dumps(to_report_units(metrics), indent=2)
         if args.json:
             write_text(text + "\n", args.json)
@@ -428,6 +440,17 @@ def main(argv=None):
         return 2
     print(text)
     return 0
+
+
+def _check_units(frame, region, args):
+    """A ValueError if ``--region`` [mm] looks like metres: narrower than the dump's median particle."""
+    if "radius" not in frame.atoms or frame.atoms.empty:
+        return
+    typical = 2 * float(frame.atoms["radius"].median())
+    width = min(region[1] - region[0], region[3] - region[2])
+    if width < typical:
+        raise ValueError(f"region {' '.join(args.region_text)} mm is {width * 1e3:.3g} mm across, less than the "
+                         f"dump's median particle diameter ({typical * 1e3:.3g} mm): in metres? --region takes mm")
 
 
 def _check_inputs(region, speed, density, n_lines, box, unit="m"):

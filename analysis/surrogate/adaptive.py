@@ -619,7 +619,7 @@ def run_adaptive(evaluate, bounds, settings, *, axes=(), resolution=None, replic
     return AdaptiveResult(design, data, pd.DataFrame(rounds), gp, stop)
 
 
-def round_config(level, points, axes=(), replicates=1, n_test=1):
+def round_config(level, points, axes=(), replicates=1, n_test=1, cv_folds=None):
     """The config a round's Snakemake run adds to the base config (``--configfile base round``).
 
     Parameters
@@ -633,6 +633,8 @@ def round_config(level, points, axes=(), replicates=1, n_test=1):
     replicates : int
     n_test : int
         ``surrogate.n_test`` (the workflow's surrogate checks it against the points).
+    cv_folds : int, optional
+        ``surrogate.cv_folds``, at most the points (the config check refuses more); default: the base's.
 
     Returns
     -------
@@ -648,7 +650,8 @@ def round_config(level, points, axes=(), replicates=1, n_test=1):
     listed = ({"points": [dict(zip(names, map(float, p))) for p in P]} if len(axes) else
               {"points_mm_s_rad_s": [[float(u), float(w)] for u, w in P]})
     return {"level": level, "sweep": {**listed, "replicates": int(replicates)},
-            "surrogate": {"n_test": int(n_test)}}
+            "surrogate": {"n_test": int(n_test), **({} if cv_folds is None else
+                                                    {"cv_folds": int(min(cv_folds, max(2, len(P))))})}}
 
 
 class WorkflowEvaluator:
@@ -717,7 +720,8 @@ class WorkflowEvaluator:
         self.outdir.mkdir(parents=True, exist_ok=True)
         round_path = self.outdir / f"round_{self.calls}.yaml"
         cfg = round_config(self.level, self.points, self.axes, self.replicates,
-                           n_test=max(1, min(2, len(self.points) - 3)))
+                           n_test=max(1, min(2, len(self.points) - 3)),
+                           cv_folds=self.base["surrogate"]["cv_folds"])
         with atomic_path(round_path) as tmp:
             tmp.write_text(yaml.safe_dump(cfg, sort_keys=False))
         table = self.run_table(points, self.resolved(cfg))

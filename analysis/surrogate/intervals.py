@@ -43,6 +43,7 @@ units (the products in the products of the units).
 """
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -334,6 +335,20 @@ def calibrated_from_predictions(model, predictions, df, rho, confidence, noise_s
                               predictions[[f"{m}_std" for m in METRICS]].to_numpy(float))
     c, scores = calibrate(y, mean, std, rho)
     return CalibratedSurrogate(model, c, rho, scores, len(np.unique(rows)), confidence, noise_source)
+
+
+def unbounded_warning(grid, n_runs, confidence):
+    """A one-line warning if ``grid`` holds infinite values (interval bounds no calibration run could
+    set: split conformal needs ``ceil(confidence (n + 1)) <= n`` runs), else None."""
+    numeric = grid.select_dtypes("number")
+    columns = [c for c in numeric.columns if np.isinf(numeric[c].to_numpy(float)).any()]
+    if not columns:
+        return None
+    need = next(n for n in itertools.count(1) if math.ceil(confidence * (n + 1)) <= n)  # conformal_quantile's
+    return (f"warning: {len(columns)} interval columns of the grid are infinite ({', '.join(columns[:3])}"
+            f"{', ...' if len(columns) > 3 else ''}): {100 * confidence:g} % intervals need at least {need} "
+            f"calibration runs, the model has {n_runs}; add sweep points or replicates, or lower "
+            "surrogate.confidence")
 
 
 def interval_frame(model, X, confidence=None):

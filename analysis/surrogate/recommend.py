@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.config import load_schema
 from analysis.io import USER_ERRORS, error_line
 from analysis.metrics.dataset import METRICS, SHORT_NAMES, input_units
 from analysis.surrogate.intervals import check_confidence
@@ -277,8 +278,12 @@ def main(argv=None):
         _check_limit("--max-roughness", args.max_roughness)
         if args.confidence is not None and not 0 < args.confidence < 1:
             raise ValueError(f"--confidence must be between 0 and 1 (e.g. 0.9), got {args.confidence:g}")
-        if args.grid_points < 2:
-            raise ValueError(f"--grid-points must be at least 2, got {args.grid_points}")
+        most = load_schema()["properties"]["surrogate"]["properties"]["grid_points"]["maximum"]
+        if not 2 <= args.grid_points <= most:
+            raise ValueError(f"--grid-points must be 2 to {most} (config surrogate.grid_points' bound: memory), "
+                             f"got {args.grid_points}")
+        if not 2 <= args.axis_points <= MAX_AXIS_POINTS:
+            raise ValueError(f"--axis-points must be 2 to {MAX_AXIS_POINTS} (memory), got {args.axis_points}")
         if not args.model.is_file():
             raise ValueError(f"model file not found: {args.model} (run the workflow's surrogate rule first)")
         try:
@@ -313,11 +318,18 @@ def main(argv=None):
     return 0
 
 
+#: Grid points over the range of an input other than the speeds, at most (memory).
+MAX_AXIS_POINTS = 101
+
+
 def _parse_fixed(items):
     """``["roller.gap_um=300", ...]`` as ``{"roller.gap_um": 300.0}``."""
     fixed = {}
     for item in items:
         name, sep, value = item.partition("=")
+        if name.strip() in fixed:
+            raise ValueError(f"--fix {item!r}: {name.strip()} is fixed twice (at {fixed[name.strip()]:g} too): "
+                             "give each input once")
         try:
             fixed[name.strip()] = float(value)
         except ValueError:
