@@ -158,8 +158,28 @@ def _validator():
     return _Validator(load_schema())
 
 
+def _non_text_key(node, path=()):
+    """The dotted path of the first mapping key that is not text (YAML's ``null:``, ``1:``), or None."""
+    if isinstance(node, dict):
+        for key, value in node.items():
+            if not isinstance(key, str):
+                return ".".join([*path, repr(key)])
+            found = _non_text_key(value, (*path, key))
+            if found:
+                return found
+    elif isinstance(node, list):
+        for item in node:
+            found = _non_text_key(item, path)
+            if found:
+                return found
+    return None
+
+
 def validate_schema(config: dict) -> None:
     """Raise :class:`ConfigError` on the first schema violation, naming key and value."""
+    bad = _non_text_key(config)
+    if bad:
+        raise ConfigError(f"config key {bad!r}: a key must be a name (text), e.g. U_mm_s")
     validator = _validator()
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
     if errors:
@@ -346,7 +366,10 @@ def check_speeds(config: dict) -> None:
         steps = (s.travel_end - s.box[0]) / (slowest["U_mm_s"] * 1e-3) / s.timestep
         if steps > MAX_RUN_STEPS:
             _fail("sweep.U_mm_s", slowest["U_mm_s"], f"needs {steps:.3g} time steps of {s.timestep:.3g} s to travel "
-                  f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm: at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
+                  f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm (from behind the heap, fidelity.{s.level}.heap_start_mm, "
+                  f"heap_length_mm and heap_particles, to the end of fidelity.{s.level}.sampling_start_mm + "
+                  f"sampling_length_mm + run_out_mm; the step is timestep.rayleigh_fraction of the Rayleigh time of "
+                  f"material.youngs_modulus_dem_Pa): at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
         r_min = min(s.diameters) / 2
         for p in points:
             wall = (p["U_mm_s"] * 1e-3 + abs(p["omega_rad_s"]) * s.roller_radius) * s.timestep
@@ -356,7 +379,9 @@ def check_speeds(config: dict) -> None:
                 _fail(key, p[key.split(".")[1]],
                       f"moves the roller's surface {wall * 1e6:.3g} um a time step of {s.timestep:.3g} s (U = "
                       f"{p['U_mm_s']:g} mm/s, omega = {p['omega_rad_s']:g} rad/s): more than {MAX_WALL_STEP:g} of the "
-                      f"smallest radius ({r_min * 1e6:.3g} um); lower the speeds or timestep.rayleigh_fraction")
+                      f"smallest radius ({r_min * 1e6:.3g} um); lower the speeds or the time step "
+                      "(timestep.rayleigh_fraction of the Rayleigh time set by material.youngs_modulus_dem_Pa, "
+                      "density_kg_m3 and psd.min_diameter_um)")
 
 
 def check_swept_gap(config: dict, value: float) -> None:

@@ -66,6 +66,8 @@ def test_a_swept_integer_key_stays_an_integer():
     ("fidelity__smoke__settle_time_s", 1e6, "at most 2147483647 fit a LIGGGHTS run"),
     ("sweep__U_mm_s", [40, 1900], "more than 0.1 of the smallest radius"),
     ("surrogate__cv_folds", 50, "exceeds the sweep's 45 points"),
+    ("material__youngs_modulus_dem_Pa", 1000, "minimum of 5000000"),             # found by 5000 fuzz cases
+    ("fidelity__default__run_out_mm", 299856, "fidelity.default.sampling_start_mm + sampling_length_mm + run_out_mm"),
 ])
 def test_values_beyond_a_bound_are_refused_by_key_with_the_bound(dotted, value, words):
     message = refused(with_values(**{dotted: value}))
@@ -77,6 +79,13 @@ def test_a_boolean_given_as_a_string_is_refused():
     cli = coerce_cli_values({"keep_supply_limited_runs": "yes"})  # --config keep_supply_limited_runs=yes
     assert cli == {"keep_supply_limited_runs": "yes"}
     assert coerce_cli_values({"a": "true", "b": "1e9", "c": "40"}) == {"a": True, "b": 1e9, "c": 40}
+
+
+def test_a_key_that_is_not_a_name_is_refused_by_its_place():
+    """--config 'sweep={..., null: 1}' (found by 5000 fuzz cases: jsonschema's key patterns crashed on it)."""
+    config = coerce_cli_values({"sweep": '{"U_mm_s": [40, 70], null: 1}'})
+    with pytest.raises(ConfigError, match=r"config key 'sweep.None': a key must be a name"):
+        load_config(with_values(**config), base_dir=ROOT)
 
 
 def test_a_yaml_error_in_a_config_argument_names_it_with_line_and_column():
