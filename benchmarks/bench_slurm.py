@@ -3,7 +3,7 @@
 Run from the repository root, as root, after ``apt-get install slurm-wlm munge libpmix-dev
 slurmdbd mariadb-server`` (Debian 12: SLURM 22.05.8)::
 
-    .venv/bin/python benchmarks/bench_slurm.py [--keep] [--scratch DIR] [--limit-point 100:-5]
+    .venv/bin/python benchmarks/bench_slurm.py [--keep] [--scratch DIR] [--limit-point 20:-5]
     .venv/bin/python benchmarks/bench_slurm.py --dry-run   # its Snakemake commands resolve; no cluster
 
 1. **A failing job is seen**: on a one-node cluster with accounting (munge, MariaDB,
@@ -14,7 +14,8 @@ slurmdbd mariadb-server`` (Debian 12: SLURM 22.05.8)::
 2. **Workflow to maps**: the CI's smoke workflow (``.test/config.yaml``, 6 runs) through
    ``profiles/slurm`` as it is, with 2-rank settle and spreads (``fidelity.smoke.mpi_ranks=2``).
 3. **Time limit**: in the same folder one more spread (``--limit-point``, a point not in
-   the sweep) with ``runtime_min: 1`` and ``--limit-checkpoints`` checkpoints: SLURM kills
+   the sweep, slow enough for a travel of a few minutes: U = 20 mm/s takes about 5 times the
+   smoke sweep's U = 100 mm/s) with ``runtime_min: 1`` and ``--limit-checkpoints`` checkpoints: SLURM kills
    it at its limit (TIMEOUT), Snakemake's retries resubmit it (``--limit-retries``: the
    profile's 2 are for real limits, which a spread rarely meets; a 1-minute limit on a
    spread of several minutes needs more), and each attempt resumes from its newest checkpoint.
@@ -144,8 +145,9 @@ def main(argv=None):
     parser.add_argument("--keep", action="store_true", help="keep the scratch folder")
     parser.add_argument("--scratch", type=Path, help="a scratch folder of an earlier run: the phases it "
                         "finished (its out.json) are not run again")
-    parser.add_argument("--limit-point", default="100:-5", help="U:omega of the time-limited spread (mm/s:rad/s); "
-                        "it must need several minutes but fewer than about --limit-retries")
+    parser.add_argument("--limit-point", default="20:-5", help="U:omega of the time-limited spread (mm/s:rad/s); "
+                        "slow enough that its travel needs a few minutes (SLURM's smallest limit is 1 minute) "
+                        "but fewer than about --limit-retries")
     parser.add_argument("--limit-checkpoints", type=int, default=20, help="its checkpoints_per_run")
     parser.add_argument("--limit-retries", type=int, default=8, help="Snakemake's --retries for it")
     parser.add_argument("--dry-run", action="store_true", help="only check that the phases' Snakemake commands "
