@@ -15,7 +15,7 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 APT_PACKAGES := liggghts liggghts-doc openmpi-bin libegl1 libegl-mesa0 libgl1-mesa-dri
 export VTK_DEFAULT_OPENGL_WINDOW := vtkEGLRenderWindow
 
-# The one-node SLURM cluster of benchmarks/bench_slurm.py (not needed by `make test`).
+# The one-node SLURM cluster of benchmarks/bench_slurm.py (benchmarks/slurm_cluster.py; not needed by `make test`).
 SLURM_APT_PACKAGES := slurm-wlm munge libpmix-dev slurmdbd mariadb-server
 
 .PHONY: map test setup system-packages report clean bench-slurm

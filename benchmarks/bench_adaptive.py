@@ -38,20 +38,15 @@ import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from analysis.config import load_config
-from analysis.metrics.dataset import METRICS
-from analysis.surrogate.adaptive import ACQUISITIONS, WorkflowEvaluator, initial_design, run_adaptive, sweep_bounds
-from analysis.surrogate.candidates import CANDIDATES, make_candidate
-from analysis.surrogate.data import inputs_of, targets_of
-
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-
-def cpu_model() -> str:
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return platform.processor()
+from analysis.config import load_config  # noqa: E402
+from analysis.metrics.dataset import METRICS  # noqa: E402
+from analysis.surrogate.adaptive import ACQUISITIONS, WorkflowEvaluator, initial_design, run_adaptive, sweep_bounds  # noqa: E402
+from analysis.surrogate.candidates import CANDIDATES, make_candidate  # noqa: E402
+from analysis.surrogate.data import inputs_of, targets_of  # noqa: E402
+from benchmarks.machine import cpu_model  # noqa: E402
 
 
 def subgrids(U, omega):

@@ -33,14 +33,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.config import load_config
-from analysis.metrics.dataset import METRICS
-from analysis.surrogate.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds
-from analysis.surrogate.candidates import GPSurrogate
-from analysis.surrogate.data import inputs_of, targets_of
-from benchmarks.bench_adaptive import cpu_model, subgrids
-
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from analysis.config import load_config  # noqa: E402
+from analysis.metrics.dataset import METRICS  # noqa: E402
+from analysis.surrogate.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds  # noqa: E402
+from analysis.surrogate.candidates import GPSurrogate  # noqa: E402
+from analysis.surrogate.data import inputs_of, targets_of  # noqa: E402
+from benchmarks.bench_adaptive import subgrids  # noqa: E402
+from benchmarks.machine import cpu_model  # noqa: E402
 
 
 def main(argv=None) -> int:

@@ -28,13 +28,15 @@ import time
 from pathlib import Path
 
 import pandas as pd
-from bench_layer_metrics import machine
-
-from analysis.faults import campaign, compare_runs, half_written_files
-from analysis.metrics.dataset import METRICS
-from analysis.metrics.noise_floor import pooled_seed_sd, two_run_tolerance
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from analysis.metrics.dataset import METRICS  # noqa: E402
+from analysis.metrics.noise_floor import pooled_seed_sd, two_run_tolerance  # noqa: E402
+from benchmarks.faults import campaign, compare_runs, half_written_files  # noqa: E402
+from benchmarks.machine import machine  # noqa: E402
+
 TARGET = "results/smoke/dataset.csv"
 
 

@@ -17,9 +17,10 @@ import sys
 import time
 from pathlib import Path
 
-from bench_layer_metrics import machine
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from benchmarks.machine import machine  # noqa: E402
 
 
 def main(argv=None):

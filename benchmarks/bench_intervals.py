@@ -38,7 +38,7 @@ import pandas as pd
 from scipy.stats import norm
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]     # benchmarks.bench_adaptive; tests' synthetic data
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]     # `benchmarks` (run as a script); tests' synthetic data
 
 from analysis.config import load_config  # noqa: E402
 from analysis.metrics.dataset import METRICS  # noqa: E402
@@ -46,7 +46,7 @@ from analysis.metrics.noise_floor import POOLED  # noqa: E402
 from analysis.surrogate.data import inputs_of, point_folds, targets_of  # noqa: E402
 from analysis.surrogate.intervals import calibrated_from_predictions, interval_score, relative_noise  # noqa: E402
 from analysis.surrogate.selection import choose_model, cross_validate_models, fit_chosen, min_coverage_pct  # noqa: E402
-from benchmarks.bench_adaptive import cpu_model  # noqa: E402
+from benchmarks.machine import cpu_model  # noqa: E402
 
 
 def calibrated_candidates(df, params):

@@ -14,8 +14,6 @@ core. Prints a Markdown table and writes it, with the machine, to
 ``benchmarks/measured/layer_metrics.md``; exits 1 if the requirement fails.
 """
 
-import datetime
-import platform
 import sys
 import tempfile
 import time
@@ -25,10 +23,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.metrics.dump import read_dump, write_dump
-from analysis.metrics.profilometer import spread_layer_metrics
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from analysis.metrics.dump import read_dump, write_dump  # noqa: E402
+from analysis.metrics.profilometer import spread_layer_metrics  # noqa: E402
+from benchmarks.machine import machine  # noqa: E402
 
 SIDE = 25e-3  # region side [m]
 REGION = (0.0, SIDE, 0.0, SIDE)
@@ -89,17 +89,6 @@ def _timed(fn):
     t = time.perf_counter()
     fn()
     return time.perf_counter() - t
-
-
-def machine():
-    """One line naming the machine: architecture, CPU model, date."""
-    cpu = "unknown CPU"
-    try:
-        cpu = next(ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return f"{platform.machine()}, {cpu}, Python {platform.python_version()}, NumPy {np.__version__}, " \
-           f"{datetime.date.today().isoformat()}"
 
 
 def main():

@@ -22,10 +22,11 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.config import load_config, scene
-from analysis.dem.drop import drop_sphere, first_bounce
-
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from analysis.config import load_config, scene  # noqa: E402
+from benchmarks.restitution_drop import drop_sphere, first_bounce  # noqa: E402
 
 
 def main(argv=None) -> int:

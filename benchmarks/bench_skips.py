@@ -36,11 +36,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.config import load_config
-from analysis.dem.simulate import SKIPS, make_geometry, settle, spread
-from benchmarks.bench_fidelity import METRICS, children_cpu, measure_layer
-
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from analysis.config import load_config  # noqa: E402
+from analysis.dem.simulate import SKIPS, make_geometry, settle, spread  # noqa: E402
+from benchmarks.bench_fidelity import METRICS, children_cpu, measure_layer  # noqa: E402
 
 DEFAULT_POINTS = ",".join(f"{U}:{w}" for U in (40, 70, 100) for w in (-10, 0, 10))
 

@@ -7,7 +7,7 @@ slurmdbd mariadb-server`` (Debian 12: SLURM 22.05.8)::
     .venv/bin/python benchmarks/bench_slurm.py --dry-run   # its Snakemake commands resolve; no cluster
 
 1. **A failing job is seen**: on a one-node cluster with accounting (munge, MariaDB,
-   slurmdbd, slurmctld, slurmd; :mod:`analysis.slurm_cluster`), a settle that cannot
+   slurmdbd, slurmctld, slurmd; :mod:`benchmarks.slurm_cluster`), a settle that cannot
    start MPI (the launcher forced to plain ``srun``, which Debian's Open MPI cannot use)
    through ``profiles/slurm``: the job fails at once, is retried twice (the profile's
    ``retries``), and Snakemake must stop with an error; status by ``sacct``.
@@ -47,14 +47,16 @@ import time
 from pathlib import Path
 
 import pandas as pd
-from bench_layer_metrics import machine
-
-from analysis.faults import compare_runs, half_written_files
-from analysis.metrics.dataset import METRICS
-from analysis.metrics.noise_floor import pooled_seed_sd, two_run_tolerance
-from analysis.slurm_cluster import OneNodeCluster, job_table, missing_commands, snakemake_job_events
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from analysis.metrics.dataset import METRICS  # noqa: E402
+from analysis.metrics.noise_floor import pooled_seed_sd, two_run_tolerance  # noqa: E402
+from benchmarks.faults import compare_runs, half_written_files  # noqa: E402
+from benchmarks.machine import machine  # noqa: E402
+from benchmarks.slurm_cluster import OneNodeCluster, job_table, missing_commands, snakemake_job_events  # noqa: E402
+
 RANKS = {"smoke": {"mpi_ranks": 2}}
 SEEN_WITHIN_S = 60
 
@@ -117,7 +119,7 @@ def roller_end_difference(run_dir, ref):
 
 def compare(slurm_runs, local_runs, tolerance):
     """Each SLURM run against its local twin: bit identity and metric differences
-    (:func:`analysis.faults.compare_runs`, as for the kill campaign), plus the launcher, wall
+    (:func:`benchmarks.faults.compare_runs`, as for the kill campaign), plus the launcher, wall
     times, particle balance and the roller's end."""
     names = [p.name for p in sorted(Path(slurm_runs).glob("U*_w*_r*"))
              if (p / "health.json").is_file() and (Path(local_runs) / p.name / "health.json").is_file()]
@@ -314,7 +316,7 @@ def write(out, checks, table, tolerance):
         "snakemake 9.27.1, snakemake-executor-plugin-slurm 2.8.0 (jobstep 0.6.1).",
         "- The cluster: munged, MariaDB, slurmdbd, slurmctld, slurmd on 127.0.0.1, 2 CPUs, "
         "`TaskPlugin=task/affinity`, `ProctrackType=proctrack/linuxproc`, `KillWait=10`, `MinJobAge=300`; "
-        "configuration written to a scratch folder (`analysis/slurm_cluster.py`).",
+        "configuration written to a scratch folder (`benchmarks/slurm_cluster.py`).",
         f"- Smoke workflow to maps through `profiles/slurm` (6 spreads + 1 settle, 2 ranks each): exit "
         f"{out['workflow']['returncode']}, {out['workflow']['wall_s']:.0f} s; the same locally (`--cores 2`, "
         f"mpirun) with the time-limited point: {out['local']['wall_s']:.0f} s.",

@@ -12,17 +12,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from analysis.config import load_config
-from analysis.dem.simulate import make_geometry, settle, spread
-
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-
-def cpu_model() -> str:
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return platform.processor()
+from analysis.config import load_config  # noqa: E402
+from analysis.dem.simulate import make_geometry, settle, spread  # noqa: E402
+from benchmarks.machine import cpu_model  # noqa: E402
 
 
 def main(levels):

@@ -419,11 +419,10 @@ def test_a_grid_with_unbounded_intervals_comes_with_a_warning():
     assert unbounded_warning(grid.drop(columns=["mass_g_lo", "mass_g_hi"]), 6, 0.9) is None
 
 
-def test_the_slurm_benchmarks_commands_resolve_without_a_cluster(monkeypatch, capsys):
+def test_the_slurm_benchmarks_commands_resolve_without_a_cluster(capsys):
     """benchmarks/bench_slurm.py --dry-run: its phases' Snakemake commands, the time-limited spread
     outside the sweep among them, resolve (the full run on a cluster: make bench-slurm)."""
-    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
-    import bench_slurm
+    from benchmarks import bench_slurm
     with pytest.raises(SystemExit) as exit_:
         bench_slurm.main(["--limit-point", "fast"])
     assert exit_.value.code == 2 and "--limit-point 'fast': give U:omega" in capsys.readouterr().err

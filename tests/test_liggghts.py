@@ -15,7 +15,6 @@ from scipy.spatial import cKDTree
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 from analysis.config import scene
-from analysis.dem.drop import drop_sphere, first_bounce, free_fall_time
 from analysis.dem.health import substrate_height
 from analysis.dem.inputs import (
     FEED_BEHIND_FRONT_DIAMETERS,
@@ -27,6 +26,7 @@ from analysis.dem.inputs import (
 from analysis.dem.liggghts import LiggghtsError, check_seeds, input_path, read_log, run
 from analysis.dem.simulate import make_geometry, settle, spread
 from analysis.metrics.dump import read_dump
+from benchmarks.restitution_drop import drop_sphere, first_bounce, free_fall_time
 from tests.test_config import ROOT  # noqa: E402
 
 U_MM_S, OMEGA = 100.0, -5.0

@@ -11,7 +11,7 @@ import psutil
 import pytest
 
 from analysis.dem.liggghts import MpiStartError, check_launcher, run
-from analysis.slurm_cluster import OneNodeCluster, snakemake_job_events
+from benchmarks.slurm_cluster import OneNodeCluster, snakemake_job_events
 
 
 def test_a_launcher_that_cannot_start_mpi_is_named_with_the_fix(tmp_path, monkeypatch):

@@ -17,8 +17,8 @@ import yaml
 from conftest import SMOKE_SEED_SD
 from PIL import Image
 
-from analysis.faults import campaign, compare_runs, half_written_files
 from analysis.metrics.noise_floor import two_run_tolerance
+from benchmarks.faults import campaign, compare_runs, half_written_files
 from tests.test_config import ROOT
 
 TEST_CONFIG = yaml.safe_load((ROOT / ".test/config.yaml").read_text())
