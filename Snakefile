@@ -6,7 +6,8 @@ from pathlib import Path
 from snakemake.utils import min_version
 
 # the analysis package is installed by the README's setup (pip install -e .)
-from analysis.config import ConfigError, coerce_cli_values, read_config_file
+from analysis.config.errors import ConfigError
+from analysis.config.reading import coerce_cli_values, read_config_file
 
 min_version("9.0")
 

@@ -16,11 +16,11 @@ from analysis.io import USER_ERRORS, error_line
 
 def by_folder(find, config: dict, table: dict, base_dir):
     """``name -> find(config, name, table, base_dir)`` for the rules' input functions and params
-    (:func:`analysis.config.find_run`, :func:`~analysis.config.find_heap`): a ConfigError becomes
+    (:func:`analysis.config.folders.find_run`, :func:`~analysis.config.folders.find_heap`): a ConfigError becomes
     Snakemake's WorkflowError, one line naming the folder."""
     from snakemake.exceptions import WorkflowError
 
-    from analysis.config import ConfigError
+    from analysis.config.errors import ConfigError
 
     def of(name):
         try:

@@ -41,7 +41,7 @@ from matplotlib.figure import Figure
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-from analysis.config import load_config  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
 from analysis.metrics.dataset import METRICS  # noqa: E402
 from analysis.surrogate.adaptive import ACQUISITIONS, WorkflowEvaluator, initial_design, run_adaptive, sweep_bounds  # noqa: E402
 from analysis.surrogate.candidates import CANDIDATES, make_candidate  # noqa: E402

@@ -36,7 +36,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-from analysis.config import load_config  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
 from analysis.metrics.dataset import METRICS  # noqa: E402
 from analysis.surrogate.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds  # noqa: E402
 from analysis.surrogate.candidates import GPSurrogate  # noqa: E402

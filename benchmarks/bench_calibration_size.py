@@ -24,7 +24,8 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.calibration.characterise import bulk_density_test, repose_test
-from analysis.config import PROJECT_DIR, load_config
+from analysis.config.load import load_config
+from analysis.config.reading import PROJECT_DIR
 
 OUT = PROJECT_DIR / "benchmarks" / "measured"
 

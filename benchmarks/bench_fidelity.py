@@ -33,7 +33,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.config import load_config, scene
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
 from analysis.dem.liggghts import LiggghtsError, children_cpu
 from analysis.dem.simulate import make_geometry, settle, spread
 from analysis.metrics.dump import read_dump

@@ -40,7 +40,7 @@ from scipy.stats import norm
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]     # `benchmarks` (run as a script); tests' synthetic data
 
-from analysis.config import load_config  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
 from analysis.metrics.dataset import METRICS  # noqa: E402
 from analysis.metrics.noise_floor import POOLED  # noqa: E402
 from analysis.surrogate.data import inputs_of, point_folds, targets_of  # noqa: E402

@@ -24,7 +24,9 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
-from analysis.config import load_config, run_name, scene
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
+from analysis.config.sweep import run_name
 from analysis.dem.simulate import spread
 from analysis.metrics.dump import read_dump
 from analysis.metrics.profilometer import spread_layer_metrics, to_report_units

@@ -25,7 +25,8 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-from analysis.config import load_config, scene  # noqa: E402
+from analysis.config.fidelity import scene  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
 from benchmarks.restitution_drop import drop_sphere, first_bounce  # noqa: E402
 
 

@@ -44,7 +44,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-from analysis.config import load_config  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
 from analysis.dem.simulate import CHECKPOINT_DIR  # noqa: E402
 from analysis.metrics.dataset import METRICS  # noqa: E402
 from analysis.metrics.noise_floor import pooled_seed_sd  # noqa: E402

@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.config import load_config, scene
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
 from analysis.dem.simulate import make_geometry, settle, spread
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -40,7 +40,8 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from analysis.config import load_config, scene
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
 from analysis.metrics.deposit import deposit_profile, pile_ahead, profile_figure, run_profiles, steady_state_start
 from analysis.metrics.dump import read_dump
 from analysis.metrics.profilometer import spread_layer_metrics, to_report_units

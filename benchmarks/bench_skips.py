@@ -39,7 +39,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-from analysis.config import load_config  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
 from analysis.dem.simulate import SKIPS, make_geometry, settle, spread  # noqa: E402
 from benchmarks.bench_fidelity import METRICS, children_cpu, measure_layer  # noqa: E402
 

@@ -15,7 +15,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-from analysis.config import load_config  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
 from analysis.dem.simulate import make_geometry, settle, spread  # noqa: E402
 from benchmarks.machine import cpu_model  # noqa: E402
 

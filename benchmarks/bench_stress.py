@@ -30,7 +30,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-from analysis.config import load_config  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
 from benchmarks.bench_fidelity import run_scene, variant_config  # noqa: E402
 
 UNGUARDED = {"timestep.max_rayleigh_fraction": 100.0}  # lift the wrapper's time-step guard

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.config import Scene
+from analysis.config.fidelity import Scene
 from analysis.dem import geometry
 from analysis.dem.inputs import contact_model, skin
 from analysis.dem.liggghts import render, run

@@ -1,16 +1,15 @@
 # Shared by every rule file: the checked configuration, the fidelity level and the runs.
 from analysis.metrics.deposit import profile_runs as deposit_profile_runs
 from analysis.rule import by_folder
-from analysis.config import (
-    ConfigError,
-    find_heap,
-    find_run,
+from analysis.config.errors import ConfigError
+from analysis.config.fidelity import scene
+from analysis.config.folders import find_heap, find_run
+from analysis.config.load import load_config
+from analysis.config.sweep import (
     heap_config,
     heaps_by_name,
-    load_config,
     run_config,
     runs_by_name,
-    scene,
     simulation_fingerprint,
     sweep_runs,
 )

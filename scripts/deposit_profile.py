@@ -1,6 +1,6 @@
 """Snakemake entry: deposit profiles (layer mass along the travel) of a few runs, region shaded."""
 
-from analysis.config import scene
+from analysis.config.fidelity import scene
 from analysis.io import atomic_path
 from analysis.metrics.deposit import profile_figure, run_profiles
 from analysis.rule import rule_context

@@ -1,7 +1,9 @@
 """Snakemake entry: write one heap's substrate and roller meshes (its replicate and heap-changing values)."""
 from pathlib import Path
 
-from analysis.config import PROJECT_DIR, find_heap, heap_config
+from analysis.config.folders import find_heap
+from analysis.config.reading import PROJECT_DIR
+from analysis.config.sweep import heap_config
 from analysis.dem.simulate import make_geometry
 from analysis.io import write_json
 from analysis.rule import rule_context

@@ -1,6 +1,9 @@
 """Snakemake entry: the paper's layer metrics (eqs. 1-7) of one run, and its final state as VTK."""
 
-from analysis.config import PROJECT_DIR, find_run, run_config, scene
+from analysis.config.fidelity import scene
+from analysis.config.folders import find_run
+from analysis.config.reading import PROJECT_DIR
+from analysis.config.sweep import run_config
 from analysis.io import write_json
 from analysis.metrics.dump import read_dump
 from analysis.metrics.profilometer import spread_layer_metrics, to_report_units

@@ -2,7 +2,8 @@
 
 import yaml
 
-from analysis.config import PROJECT_DIR, run_parameters, sweep_runs
+from analysis.config.reading import PROJECT_DIR
+from analysis.config.sweep import run_parameters, sweep_runs
 from analysis.io import write_text
 from analysis.rule import rule_context
 

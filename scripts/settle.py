@@ -1,7 +1,9 @@
 """Snakemake entry: settle one heap (a replicate, with the values of the axes the heap depends on)."""
 from pathlib import Path
 
-from analysis.config import PROJECT_DIR, find_heap, heap_config
+from analysis.config.folders import find_heap
+from analysis.config.reading import PROJECT_DIR
+from analysis.config.sweep import heap_config
 from analysis.dem.simulate import settle
 from analysis.rule import rule_context
 

@@ -1,7 +1,9 @@
 """Snakemake entry: one spreading pass at the run's U [mm/s] and omega [rad/s], its extra axes' values in place."""
 from pathlib import Path
 
-from analysis.config import PROJECT_DIR, find_run, run_config
+from analysis.config.folders import find_run
+from analysis.config.reading import PROJECT_DIR
+from analysis.config.sweep import run_config
 from analysis.dem.simulate import spread
 from analysis.rule import rule_context
 

@@ -132,5 +132,5 @@ def fake_snakemake(tmp_path):
 @pytest.fixture(scope="session")
 def config():
     """The shipped config.yaml, loaded and checked."""
-    from analysis.config import load_config
+    from analysis.config.load import load_config
     return load_config(Path(__file__).resolve().parent.parent / "config.yaml")

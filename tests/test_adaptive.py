@@ -5,7 +5,9 @@ import pandas as pd
 import pytest
 import yaml
 
-from analysis.config import ConfigError, load_config, run_name, runs_by_name
+from analysis.config.errors import ConfigError
+from analysis.config.load import load_config
+from analysis.config.sweep import run_name, runs_by_name
 from analysis.metrics.dataset import METRICS
 from analysis.surrogate.adaptive import (
     WorkflowEvaluator,
@@ -203,7 +205,7 @@ def test_too_small_a_budget_is_refused(capsys):
 def fake_snakemake(work, calls):
     """A stand-in for ``subprocess.run`` of Snakemake: checks the merged round config and writes
     each requested run's metrics (Q_s = U, R_q = the gap if swept), health and benchmark files,
-    the run found by its folder name in that config (:func:`analysis.config.runs_by_name`)."""
+    the run found by its folder name in that config (:func:`analysis.config.sweep.runs_by_name`)."""
     import json
     import subprocess
 

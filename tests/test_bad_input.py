@@ -8,7 +8,10 @@ import numpy as np
 import pytest
 import yaml
 
-from analysis.config import ConfigError, coerce_cli_values, load_config, sweep_runs
+from analysis.config.errors import ConfigError
+from analysis.config.load import load_config
+from analysis.config.reading import coerce_cli_values
+from analysis.config.sweep import sweep_runs
 from tests.test_config import ROOT
 
 BASE = yaml.safe_load((ROOT / "config.yaml").read_text())
@@ -202,7 +205,7 @@ def test_a_bad_mesh_is_refused_in_one_line_naming_the_file(generated, tmp_path, 
 
 
 def test_a_meshs_content_is_in_the_fingerprint(generated, tmp_path):
-    from analysis.config import simulation_fingerprint
+    from analysis.config.sweep import simulation_fingerprint
     mesh = tmp_path / "mine.stl"
     mesh.write_bytes(generated.read_bytes())
     config = load_config(with_values(level="smoke", substrate__mesh="mine.stl"), base_dir=tmp_path)

@@ -22,7 +22,7 @@ from analysis.calibration.calibrate import (
     targets,
 )
 from analysis.calibration.characterise import base_disk, cup_density, heap_angle
-from analysis.config import load_config
+from analysis.config.load import load_config
 from analysis.dem.liggghts import LiggghtsError
 from tests.test_config import ROOT
 

@@ -7,7 +7,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from analysis.config import ConfigError, coerce_cli_values, load_config, scene
+from analysis.config.errors import ConfigError
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
+from analysis.config.reading import coerce_cli_values
 from analysis.physics import feed_length, liggghts_seeds, psd_classes, rayleigh_time, roller_motion
 
 ROOT = Path(__file__).resolve().parent.parent

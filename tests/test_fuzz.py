@@ -23,7 +23,11 @@ import yaml
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from analysis.config import ConfigError, coerce_cli_values, load_config, scene, sweep_runs
+from analysis.config.errors import ConfigError
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
+from analysis.config.reading import coerce_cli_values
+from analysis.config.sweep import sweep_runs
 from analysis.metrics.dump import DumpError, read_dump, write_dump
 from analysis.metrics.profilometer import main as layer_metrics_main
 from tests.test_config import ROOT

@@ -3,7 +3,9 @@ import numpy as np
 import pytest
 import yaml
 
-from analysis.config import ConfigError, load_config, scene
+from analysis.config.errors import ConfigError
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
 from analysis.dem import geometry
 from analysis.dem.simulate import make_geometry
 from analysis.physics import polygon_circumradius

@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
-from analysis.config import scene
+from analysis.config.fidelity import scene
 from analysis.dem.health import substrate_height
 from analysis.dem.inputs import (
     FEED_BEHIND_FRONT_DIAMETERS,

@@ -10,7 +10,8 @@ from types import SimpleNamespace
 import pytest
 import yaml
 
-from analysis.config import load_config, scene
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
 from analysis.dem.liggghts import mpi_command
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,17 +15,10 @@ import pandas as pd
 import pytest
 import yaml
 
-from analysis.config import (
-    ConfigError,
-    heap_config,
-    load_config,
-    run_config,
-    scene,
-    simulation_fingerprint,
-    sweep_points,
-    sweep_runs,
-    variants,
-)
+from analysis.config.errors import ConfigError
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
+from analysis.config.sweep import heap_config, run_config, simulation_fingerprint, sweep_points, sweep_runs, variants
 from analysis.metrics.dataset import build_dataset, input_columns, input_units, point_groups, point_means
 from analysis.surrogate.data import inputs_of, split_runs
 

@@ -61,7 +61,8 @@ def test_the_workflow_ends_on_one_line_of_what_the_spreads_cost(workflow):
     assert 0 < float(wall_min) * 60 >= data.cpu_s.max() / 2
     # counted over every particle integrated: at least every particle present from the start (the final
     # ones and those removed ahead of the stopped roller, less the fed ones) over every step of the travel
-    from analysis.config import load_config, scene
+    from analysis.config.fidelity import scene
+    from analysis.config.load import load_config
     dt = scene(load_config(ROOT / "config.yaml"), "smoke").timestep
     travel_steps = data.roller_travel_m / (data.U_mm_s * 1e-3) / dt
     present = data.atoms + data.removed_ahead_of_roller - data.fed_particles

@@ -3,7 +3,7 @@
 (a cup filled by a loose rain, struck off at its rim).
 
 Both run the spreading scene's material, PSD and contact (``templates/_physics.j2``
-through :func:`analysis.config.scene`), from ``templates/repose.in.j2`` and
+through :func:`analysis.config.fidelity.scene`), from ``templates/repose.in.j2`` and
 ``templates/bulk_density.in.j2``, and are measured here from their final dump with
 vectorised numpy (no loop over particles). docs/calibration.md says what they measure
 and how big they must be.
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from analysis.config import scene
+from analysis.config.fidelity import scene
 from analysis.dem import geometry
 from analysis.dem.health import _check_timestep, check_kinetic_energy, squeeze_out_speed
 from analysis.dem.inputs import THERMO_EVERY, contact_model, rest_loop, skin

@@ -14,7 +14,7 @@ import pandas as pd
 from scipy.interpolate import RegularGridInterpolator
 from scipy.spatial import cKDTree
 
-from analysis.config import Scene
+from analysis.config.fidelity import Scene
 from analysis.dem import geometry
 from analysis.dem.liggghts import LiggghtsError
 from analysis.metrics.dump import read_dump

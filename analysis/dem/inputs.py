@@ -1,7 +1,7 @@
 """What a LIGGGHTS input of one scene needs besides the config: seeds, the
 contact model, neighbour bins and skin, the MPI grid, and the plans of the
 spreading pass (checkpoints, feeds of the pile, travel segments). Plain
-functions of a :class:`~analysis.config.Scene`, in SI units; the templates in
+functions of a :class:`~analysis.config.fidelity.Scene`, in SI units; the templates in
 ``templates/`` print what they return.
 """
 from __future__ import annotations
@@ -10,7 +10,7 @@ from math import ceil, sqrt
 
 import numpy as np
 
-from analysis.config import Scene
+from analysis.config.fidelity import Scene
 from analysis.physics import liggghts_seeds
 
 THERMO_EVERY = 1000

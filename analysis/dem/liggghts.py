@@ -32,7 +32,7 @@ import jinja2
 import numpy as np
 import pandas as pd
 
-from analysis.config import PROJECT_DIR
+from analysis.config.reading import PROJECT_DIR
 from analysis.physics import is_prime
 
 TEMPLATES = PROJECT_DIR / "templates"

@@ -25,7 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.config import MAX_RUN_STEPS, PEAK_CAP, ConfigError, Scene, load_config, scene
+from analysis.config.checks import MAX_RUN_STEPS
+from analysis.config.errors import ConfigError
+from analysis.config.fidelity import PEAK_CAP, Scene, scene
+from analysis.config.load import load_config
 from analysis.dem import geometry
 from analysis.dem.health import (
     MAX_STRAYS,

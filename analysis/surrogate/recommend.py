@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.config import load_schema
+from analysis.config.reading import load_schema
 from analysis.io import USER_ERRORS, error_line
 from analysis.metrics.dataset import METRICS, SHORT_NAMES, input_units
 from analysis.surrogate.intervals import check_confidence

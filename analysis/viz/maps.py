@@ -33,7 +33,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 
-from analysis.config import variant_path
+from analysis.config.sweep import variant_path
 from analysis.io import atomic_path
 from analysis.metrics.dataset import INPUTS, METRICS, SHORT_NAMES, input_columns, input_units, point_means
 from analysis.surrogate.data import inputs_of

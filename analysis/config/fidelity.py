@@ -1,0 +1,120 @@
+"""The scene of one fidelity level in SI units: :func:`scene` resolves a checked config into a :class:`Scene`."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import sqrt
+
+from analysis.config.errors import refuse
+from analysis.physics import INSERTION_SOLID_FRACTION, feed_length, number_mean_volume, psd_classes, rayleigh_time
+
+#: The generated substrate's peaks are clipped at this fraction of ``roller.gap_um``
+#: (3.4 Sq at the configured 300 um gap and Sq 79 um): otherwise the paper
+#: level's large field puts a node through the roller.
+PEAK_CAP = 0.9
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything a run needs, in SI units. Built by :func:`scene`."""
+    level: str
+    strip_width: float
+    heap: tuple            # (xlo, xhi, zlo, zhi) of the insertion block [m]
+    heap_particles: int
+    sampling_region: tuple  # (xmin, xmax, ymin, ymax) [m]
+    travel_end: float       # x of the roller axis when it stops [m]
+    roller_radius: float
+    roller_gap: float
+    roller_facets: int
+    diameters: tuple        # size-class diameters [m]
+    mass_fractions: tuple
+    density: float
+    youngs_modulus: float
+    poisson_ratio: float
+    restitution: float
+    friction_particle: float
+    friction_wall: float
+    rolling_friction: float
+    cohesion_energy_density: float
+    timestep: float
+    rayleigh_time: float
+    max_rayleigh_fraction: float
+    settle_time: float
+    rest_time: float
+    rest_speed: float       # RMS speed [m/s] below which particles are at rest
+    profilometer_lines: int
+    mpi_ranks: int
+    runtime_min: int | None      # cluster wall-clock limit of a settle or spread job [min]; None: the cluster's
+    mem_mb_per_rank: int | None  # cluster memory per MPI rank [MB]; None: the cluster's
+    checkpoints_per_run: int     # restart files written over a spread's travel (0: none)
+    feed_pile_mass: float | None  # powder mass [kg] held ahead of the roller over the strip; None: no feed
+    feed_length: float      # x-extent [m] of the feed zone ahead of the roller axis (0 without feed)
+    substrate: dict
+    substrate_x: tuple      # (xlo, xhi) the substrate must cover: the whole box [m]
+    rough_x: tuple          # (xlo, xhi) where the substrate is rough (around the sampling region) [m]
+    box: tuple              # (xlo, xhi, ylo, yhi, zlo, zhi) of the simulation box [m]
+
+    @property
+    def mean_particle_mass(self) -> float:
+        """Number-mean particle mass [kg]."""
+        return self.density * number_mean_volume(self.diameters, self.mass_fractions)
+
+
+def scene(config: dict, level: str | None = None) -> Scene:
+    """Resolve fidelity level ``level`` (default ``config['level']``) into a :class:`Scene`."""
+    level = level or config["level"]
+    if level not in config["fidelity"]:
+        refuse("level", level, f"no such fidelity level; choose one of {sorted(config['fidelity'])}")
+    lvl, mat, psd, roller = config["fidelity"][level], config["material"], config["psd"], config["roller"]
+    mm, um = 1e-3, 1e-6
+    diameters, fractions = psd_classes(psd["mean_diameter_um"] * um, psd["std_diameter_um"] * um,
+                                       psd["min_diameter_um"] * um, psd["max_diameter_um"] * um,
+                                       lvl["size_classes"])
+    width = lvl["strip_width_mm"] * mm
+    heap_length = lvl["heap_length_mm"] * mm
+    heap_start = lvl.get("heap_start_mm", 0.0) * mm
+    mean_volume = number_mean_volume(diameters, fractions)
+    heap_height = lvl["heap_particles"] * mean_volume / (INSERTION_SOLID_FRACTION * width * heap_length)
+    gap = roller["gap_um"] * um
+    radius = roller["diameter_mm"] * mm / 2
+    sample_x0 = lvl["sampling_start_mm"] * mm
+    sample_x1 = sample_x0 + lvl["sampling_length_mm"] * mm
+    sample_w = lvl.get("sampling_width_mm", lvl["strip_width_mm"]) * mm
+    y0 = (width - sample_w) / 2
+    t_r = rayleigh_time(diameters.min() / 2, mat["density_kg_m3"], mat["youngs_modulus_dem_Pa"],
+                        mat["poisson_ratio"])
+    sub = config["substrate"]
+    pile = lvl.get("feed_pile_mg_per_mm")
+    feed_pile_mass = None if pile is None else pile * 1e-6 / mm * width
+    try:
+        feed_len = 0.0 if pile is None else feed_length(feed_pile_mass / width, mat["density_kg_m3"], radius, gap)
+    except ValueError as err:
+        refuse(f"fidelity.{level}.feed_pile_mg_per_mm", pile, str(err))
+    box = (heap_start - (2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
+           sample_x1 + lvl["run_out_mm"] * mm + max(radius, feed_len) + 2 * mm,
+           0.0, width,
+           -max(gap, 6 * sub["sq_um"] * um) - 0.2 * mm, gap + 2 * radius + 5 * mm)
+    return Scene(
+        level=level, strip_width=width,
+        heap=(heap_start, heap_start + heap_length, gap, gap + heap_height), heap_particles=lvl["heap_particles"],
+        sampling_region=(sample_x0, sample_x1, y0, y0 + sample_w),
+        travel_end=sample_x1 + lvl["run_out_mm"] * mm,
+        roller_radius=radius, roller_gap=gap, roller_facets=roller["facets_around"],
+        diameters=tuple(diameters), mass_fractions=tuple(fractions),
+        density=mat["density_kg_m3"], youngs_modulus=mat["youngs_modulus_dem_Pa"],
+        poisson_ratio=mat["poisson_ratio"], restitution=mat["restitution"],
+        friction_particle=mat["sliding_friction_particle"], friction_wall=mat["sliding_friction_wall"],
+        rolling_friction=mat["rolling_friction"], cohesion_energy_density=mat["cohesion_energy_density_J_m3"],
+        timestep=config["timestep"]["rayleigh_fraction"] * t_r, rayleigh_time=t_r,
+        max_rayleigh_fraction=config["timestep"]["max_rayleigh_fraction"],
+        settle_time=lvl["settle_time_s"], rest_time=lvl["rest_time_s"],
+        rest_speed=config["rest_rms_speed_mm_s"] * mm,
+        profilometer_lines=lvl["profilometer_lines"], mpi_ranks=lvl["mpi_ranks"],
+        runtime_min=lvl.get("runtime_min"), mem_mb_per_rank=lvl.get("mem_mb_per_rank"),
+        checkpoints_per_run=lvl.get("checkpoints_per_run", 0),
+        feed_pile_mass=feed_pile_mass, feed_length=feed_len,
+        substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
+                   "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "mesh": sub["mesh"]},
+        rough_x=(sample_x0 - 0.5 * mm, sample_x1 + 0.5 * mm),
+        box=box,
+        substrate_x=box[:2],
+    )
