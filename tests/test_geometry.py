@@ -256,14 +256,13 @@ def test_simulate_cli_reports_one_line_and_writes_nothing(tmp_path, case):
 def test_health_and_profilometer_see_one_substrate(tmp_path):
     """The health checks' substrate under scattered points (particle centres) is the
     profilometer's (the mesh's own triangles) within 2 um on a rough field (Sq 79 um)."""
-    from analysis.dem.health import substrate_height as at_points
-    from analysis.metrics.profilometer import probe_lines
-    from analysis.metrics.profilometer import substrate_height as on_grid
+    from analysis.dem.health import substrate_height_at
+    from analysis.metrics.profilometer import probe_lines, substrate_height
     mesh = geometry.rough_substrate((-0.004, 0.012), 0.0012, 100e-6, 300e-6, 79e-6, seed=3, rough_x=(0.0, 0.008),
                                     taper=0.5e-3)
     path = geometry.write_stl(mesh, tmp_path / "substrate.stl")
     xs, ys = probe_lines((0.001, 0.007, 0.0, 0.0012), 200, seed=1)
-    grid = on_grid(str(path), xs, ys)
+    grid = substrate_height(str(path), xs, ys)
     X, Y = np.meshgrid(xs, ys, indexing="ij")
-    assert np.abs(at_points(path)(X, Y) - grid).max() < 2e-6  # 22 um with a Delaunay of the vertices
+    assert np.abs(substrate_height_at(path)(X, Y) - grid).max() < 2e-6  # 22 um with a Delaunay of the vertices
     assert grid.std() > 50e-6  # a rough surface, not a trivially flat one

@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 from analysis.config.fidelity import scene
-from analysis.dem.health import substrate_height
+from analysis.dem.health import substrate_height_at
 from analysis.dem.inputs import (
     FEED_BEHIND_FRONT_DIAMETERS,
     checkpoint_plan,
@@ -106,7 +106,7 @@ def test_spread_lays_powder_past_the_heap_and_loses_nothing(smoke):
     assert len(after) + removed == len(before) + fed and smoke["spread"]["lost"] == 0
     assert after.x.max() < s.travel_end + 2 * max(s.diameters)  # what sat under the roller may slump forward
     # nothing below the substrate: every centre at least half a radius above it
-    b = substrate_height(root / "meshes" / "substrate.stl")(after.x, after.y)
+    b = substrate_height_at(root / "meshes" / "substrate.stl")(after.x, after.y)
     assert np.all(after.z - b > 0.5 * after.radius)
     # the spread layer is one to three particles thick
     layer = after[(after.x > x0) & (after.x < x1)]
@@ -219,7 +219,7 @@ def test_read_log_parses_thermo_and_insertions():
            "Loop time of 0.05 on 1 procs for 1000 steps with 400 atoms\n")
     parsed = read_log(log)
     assert parsed["inserted"] == 400 and parsed["atoms_final"] == 400
-    assert len(parsed["thermo"]) == 2 and parsed["max_hertz_fraction"] == pytest.approx(0.06)
+    assert len(parsed["thermo"]) == 2 and parsed["measured_max_hertz_fraction"] == pytest.approx(0.06)
     assert parsed["warnings"] == ["WARNING: something"]
 
 

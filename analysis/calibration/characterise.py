@@ -18,7 +18,7 @@ import trimesh
 
 from analysis.config.fidelity import scene
 from analysis.dem import geometry
-from analysis.dem.health import _check_timestep, check_kinetic_energy, squeeze_out_speed
+from analysis.dem.health import check_kinetic_energy, check_timestep, squeeze_out_speed
 from analysis.dem.inputs import THERMO_EVERY, contact_model, rest_loop, skin
 from analysis.dem.liggghts import LiggghtsError, input_path, render, run
 from analysis.io import write_json
@@ -77,7 +77,7 @@ def _run_scene(template: str, config: dict, level: str, outdir: Path, seed_index
     name = template.removesuffix(".in.j2")
     (outdir / f"{name}.in").write_text(text)
     log = run(outdir / f"{name}.in", outdir / f"{name}.log")
-    _check_timestep(log, s)
+    check_timestep(log, s)
     peak = check_kinetic_energy(log, squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
     if log["inserted"] != particles:
         raise LiggghtsError(f"{name}: inserted {log['inserted']} of {particles} particles "

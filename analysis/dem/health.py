@@ -18,7 +18,7 @@ from analysis.config.fidelity import Scene
 from analysis.dem import geometry
 from analysis.dem.liggghts import LiggghtsError
 from analysis.metrics.dump import read_dump
-from analysis.metrics.profilometer import substrate_height as grid_height
+from analysis.metrics.profilometer import substrate_height
 
 #: A particle counts as "through the substrate" when its centre is this many
 #: radii below the substrate surface under it.
@@ -63,7 +63,7 @@ MAX_STRAYS = 0.01
 SURFACE_REFINE = 8
 
 
-def substrate_height(substrate_stl: str | Path):
+def substrate_height_at(substrate_stl: str | Path):
     """A vectorised z(x, y) [m] of a height-field STL at scattered points (particle centres).
 
     The surface is the profilometer's (:func:`analysis.metrics.profilometer.substrate_height`:
@@ -82,7 +82,7 @@ def substrate_height(substrate_stl: str | Path):
                          v[-1])
         fine[[0, -1]] += [1e-9, -1e-9]  # probes on the mesh's outer edge count as covered
         lines.append(fine)
-    surface = RegularGridInterpolator(lines, grid_height(mesh, *lines), bounds_error=False, fill_value=None)
+    surface = RegularGridInterpolator(lines, substrate_height(mesh, *lines), bounds_error=False, fill_value=None)
     return lambda x, y: surface(np.column_stack([np.ravel(x), np.ravel(y)])).reshape(np.shape(x))
 
 
@@ -92,7 +92,7 @@ def layer_health(atoms, s: Scene, substrate_stl, expected_atoms: int) -> dict:
     Returns the figures; raises :class:`LiggghtsError` on a failure."""
     xyz = atoms[["x", "y", "z"]].to_numpy()
     radius = atoms["radius"].to_numpy()
-    below = (xyz[:, 2] - substrate_height(substrate_stl)(xyz[:, 0], xyz[:, 1])) / radius
+    below = (xyz[:, 2] - substrate_height_at(substrate_stl)(xyz[:, 0], xyz[:, 1])) / radius
     pairs = cKDTree(xyz, boxsize=None).query_pairs(2 * radius.max(initial=0.0), output_type="ndarray")
     gaps = np.linalg.norm(xyz[pairs[:, 0]] - xyz[pairs[:, 1]], axis=1) - radius[pairs].sum(1)
     overlaps = -gaps / radius[pairs].min(1)
@@ -253,7 +253,9 @@ def heap_supply(ahead: int, heap_particles: int) -> dict:
             "heap_exhausted": ahead == 0}
 
 
-def _check_timestep(log: dict, s: Scene) -> None:
-    if log["max_rayleigh_fraction"] > s.max_rayleigh_fraction * (1 + 1e-6):
-        raise LiggghtsError(f"time step is {log['max_rayleigh_fraction']:.3f} of the Rayleigh time, above "
+def check_timestep(log: dict, s: Scene) -> None:
+    """Refuse a run whose measured time step (the log's ``measured_max_rayleigh_fraction``, LIGGGHTS'
+    ``check/timestep/gran``) exceeds the scene's limit, ``timestep.max_rayleigh_fraction``."""
+    if log["measured_max_rayleigh_fraction"] > s.max_rayleigh_fraction * (1 + 1e-6):
+        raise LiggghtsError(f"time step is {log['measured_max_rayleigh_fraction']:.3f} of the Rayleigh time, above "
                             f"timestep.max_rayleigh_fraction = {s.max_rayleigh_fraction}")

@@ -394,8 +394,8 @@ def read_log(text: str) -> dict:
 
     Returns a dict: ``thermo`` (DataFrame of every thermo block, columns as in
     ``thermo_style``), ``inserted`` (particles inserted), ``atoms_final``,
-    ``max_rayleigh_fraction``/``max_hertz_fraction`` (time step over the
-    Rayleigh and Hertz times, from ``check/timestep/gran``), ``warnings``,
+    ``measured_max_rayleigh_fraction``/``measured_max_hertz_fraction`` (the largest time step
+    over the Rayleigh and Hertz times, measured by ``check/timestep/gran``), ``warnings``,
     ``printed`` (the values of the input's ``print "spreadmap <key> <value>"`` lines),
     ``timing_s`` (:func:`timing_breakdown`).
     """
@@ -416,7 +416,8 @@ def read_log(text: str) -> dict:
     thermo = pd.concat(blocks, ignore_index=True) if blocks else pd.DataFrame()
     inserted = sum(int(n) for n in re.findall(r"inserted\s+(\d+)\s+particle templates", text))
     fractions = {key: float(thermo[col].max()) if col in thermo else float("nan")
-                 for key, col in (("max_rayleigh_fraction", "ts[1]"), ("max_hertz_fraction", "ts[2]"))}
+                 for key, col in (("measured_max_rayleigh_fraction", "ts[1]"),
+                                 ("measured_max_hertz_fraction", "ts[2]"))}
     printed = {key: float(value) for key, value in re.findall(r"^spreadmap (\w+) (\S+)$", text, re.MULTILINE)}
     return {"thermo": thermo, "inserted": inserted, "printed": printed, "timing_s": timing_breakdown(text),
             "atoms_final": int(thermo["Atoms"].iloc[-1]) if len(thermo) else 0,

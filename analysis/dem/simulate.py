@@ -33,8 +33,8 @@ from analysis.dem import geometry
 from analysis.dem.health import (
     MAX_STRAYS,
     SQUEEZE_FACTOR,
-    _check_timestep,
     check_kinetic_energy,
+    check_timestep,
     feed_health,
     feed_landings,
     heap_supply,
@@ -187,7 +187,7 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
                   stray_x=s.sampling_region[0] - max(s.diameters), max_strays=MAX_STRAYS)
     (out / "settle.in").write_text(text)
     log = ran(run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks), out / "settle.in")
-    _check_timestep(log, s)
+    check_timestep(log, s)
     peak = check_kinetic_energy(log, squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
     if log["inserted"] != s.heap_particles:
         raise LiggghtsError(f"inserted {log['inserted']} of {s.heap_particles} particles: the heap region is too "
@@ -204,8 +204,8 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     health["heap_toe_m"] = float(atoms["x"].max() + atoms["radius"].max())
     summary = {"wall_s": log["wall_s"], "cpu_s": log["cpu_s"], "steps": int(log["thermo"]["Step"].iloc[-1]),
                "mpi_launcher": log["launcher"], "timestep_s": s.timestep,
-               "rayleigh_fraction": log["max_rayleigh_fraction"],
-               "hertz_fraction": log["max_hertz_fraction"], "inserted": log["inserted"], **peak, **health}
+               "rayleigh_fraction": log["measured_max_rayleigh_fraction"],
+               "hertz_fraction": log["measured_max_hertz_fraction"], "inserted": log["inserted"], **peak, **health}
     _publish(out, summary, "settled.restart", "settled.dump")
     return summary
 
@@ -386,7 +386,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                 raise
             print(f"warning: resuming from {restart} failed, trying an older checkpoint or a fresh start:\n{err}",
                   file=sys.stderr)
-    _check_timestep(log, s)
+    check_timestep(log, s)
     health = check_kinetic_energy(log, wall_speed=wall_speed,
                                   squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
     health.update(inrun_health(log, s))
@@ -421,7 +421,8 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
                "mpi_launcher": log["launcher"], "processors": context["processors"],
                "roller_start_m": x0, "roller_travel_m": speed * travel_steps * s.timestep,
-               "rayleigh_fraction": log["max_rayleigh_fraction"], "hertz_fraction": log["max_hertz_fraction"],
+               "rayleigh_fraction": log["measured_max_rayleigh_fraction"],
+               "hertz_fraction": log["measured_max_hertz_fraction"],
                "particle_steps": particle_steps, "particle_steps_per_s": particle_steps / max(log["cpu_s"], 1e-9),
                **{f"time_{part}_s": seconds for part, seconds in log["timing_s"].items()},
                **{k: v for k, v in gap.items() if k != "circumradius_m"}, **health}
