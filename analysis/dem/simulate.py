@@ -20,6 +20,7 @@ import math
 import os
 import shutil
 import sys
+from dataclasses import dataclass
 from math import ceil
 from pathlib import Path
 
@@ -275,26 +276,57 @@ SKIPS = frozenset({"stop_at_rest", "remove_ahead", "final_dump_only"})
 BASELINE_DUMP_EVERY_S = 0.002
 
 
-def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: str | Path,
-           settled: str | Path, outdir: str | Path, movie_every: int = 0, skips=SKIPS, replicate: int = 0) -> dict:
-    """Spread the settled heap at ``U_mm_s`` [mm/s] and ``omega_rad_s`` [rad/s].
+@dataclass(frozen=True)
+class SpreadPlan:
+    """A spread ready to run (:func:`plan_spread`): its scene, where the roller starts and how long it
+    travels, the feed's top-ups, and what the input template is rendered with (:meth:`render`)."""
+    s: Scene
+    out: Path               # the run folder
+    meshes: Path
+    settled: Path
+    U_mm_s: float
+    omega_rad_s: float
+    speed: float            # U [m/s]
+    x0: float               # the roller axis' start [m]
+    travel_steps: int
+    gap: dict               # :func:`roller_gap`: the axis height and the gap as built
+    settled_particles: int  # particles of the settled heap
+    first_fed_id: int       # the id of the first particle the feed adds
+    feeds: list             # travel steps of the feed's top-ups (empty: no feed)
+    feed: dict | None       # the feed's template values
+    wall_speed: float       # the roller surface's fastest speed [m/s]
+    skips: frozenset
+    context: dict           # what every rendering of ``spread.in.j2`` shares
 
-    Writes ``spread.in``, ``spread.log``, ``final.dump`` and ``health.json``
-    into ``outdir`` and returns the health figures (with wall time and steps).
+    def render(self, step: int = 0, restart: Path | None = None) -> str:
+        """``spread.in``: the input starting at ``step`` of the travel (0: from the settled heap), from
+        ``restart`` (a checkpoint) when resumed."""
+        s, feed = self.s, self.feed
+        elapsed = step * s.timestep
+        segments = travel_segments(self.travel_steps, checkpoint_plan(self.travel_steps, s.checkpoints_per_run, step),
+                                   self.feeds, step)
+        for seg in segments:
+            if seg["feed"]:
+                seg["zone"] = feed_zone(s, self.x0 + self.speed * seg["start"] * s.timestep, feed["floor"],
+                                        self.gap["axis_z_m"])
+                seg["seed"] = feed["seeds"][seg["start"]]
+        return render("spread.in.j2", resume=restart and input_path(restart, self.out), resume_step=step,
+                      sfx="_resumed" if step else "",
+                      roller_x=self.x0 + self.speed * elapsed,
+                      roller_angle_deg=np.degrees(abs(self.omega_rad_s) * elapsed) % 360,
+                      segments=segments, feed=feed, **self.context)
 
-    With ``checkpoints_per_run`` > 0 in the fidelity level, LIGGGHTS writes
-    restart files to ``outdir/checkpoint/`` during the travel; a later call
-    for the same input (same rendered text) resumes from the newest one that
-    loads, e.g. after a cluster's time limit killed the job. Continuing the
-    roller's motion from a restart is LIGGGHTS' own (``fix move/mesh`` stores
-    it); a checkpoint that fails to load is skipped, and the run starts over.
+    def step_x(self, step: int) -> float:
+        """x [m] of the roller axis at ``step`` of the travel."""
+        return self.x0 + self.speed * step * self.s.timestep
 
-    With ``feed_pile_mg_per_mm`` in the fidelity level, the pile ahead of the
-    roller is topped up to that mass every :data:`FEED_EVERY` of travel
-    (:func:`feed_plan`, :func:`feed_zone`): the layer is laid from a pile of
-    a set size, however much the roller lays; ``fed_particles`` in the
-    health counts what was added. ``replicate`` seeds the feed.
-    """
+
+def plan_spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: str | Path,
+                settled: str | Path, outdir: str | Path, movie_every: int = 0, skips=SKIPS,
+                replicate: int = 0) -> SpreadPlan:
+    """The spread of :func:`spread`, planned but not run: the speeds, the meshes and the settled heap
+    checked, the roller placed behind the heap, the travel and the feed laid out. Nothing is written;
+    ``plan_spread(...).render()`` is the ``spread.in`` a fresh run starts from."""
     s, out = scene(config, level), Path(outdir)
     meshes, settled = Path(meshes).resolve(), Path(settled).resolve()
     if not (math.isfinite(U_mm_s) and U_mm_s > 0 and math.isfinite(omega_rad_s)):
@@ -304,7 +336,6 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                (meshes / "roller_shell.stl", "the geometry step's roller: --meshes"),
                (settled / "settled.restart", "the settled heap: --settled"),
                (settled / "settled.dump", "the settled heap: --settled"))
-    out.mkdir(parents=True, exist_ok=True)
     speed = U_mm_s * 1e-3
     substrate = geometry.load_stl(meshes / "substrate.stl")
     peak = float(substrate.vertices[:, 2].max())
@@ -353,23 +384,21 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                    movie_every=movie_every, movie="movie.dump",
                    squeeze_speed=squeeze_threshold(wall_speed, fall_height), squeeze={"factor": SQUEEZE_FACTOR},
                    dump="final.dump.part", checkpoint_dir=CHECKPOINT_DIR)
+    return SpreadPlan(s=s, out=out, meshes=meshes, settled=settled, U_mm_s=U_mm_s, omega_rad_s=omega_rad_s,
+                      speed=speed, x0=x0, travel_steps=travel_steps, gap=gap, settled_particles=len(atoms0),
+                      first_fed_id=first_fed_id, feeds=feeds, feed=feed, wall_speed=wall_speed,
+                      skips=frozenset(skips), context=context)
 
-    def render_from(step: int, restart: Path | None) -> str:
-        """The input starting at ``step`` of the travel (0: from the settled heap)."""
-        elapsed = step * s.timestep
-        segments = travel_segments(travel_steps, checkpoint_plan(travel_steps, s.checkpoints_per_run, step), feeds,
-                                   step)
-        for seg in segments:
-            if seg["feed"]:
-                seg["zone"] = feed_zone(s, x0 + speed * seg["start"] * s.timestep, feed["floor"],
-                                       gap["axis_z_m"])
-                seg["seed"] = feed["seeds"][seg["start"]]
-        return render("spread.in.j2", resume=restart and input_path(restart, out), resume_step=step,
-                      sfx="_resumed" if step else "",
-                      roller_x=x0 + speed * elapsed, roller_angle_deg=np.degrees(abs(omega_rad_s) * elapsed) % 360,
-                      segments=segments, feed=feed, **context)
 
-    fresh = render_from(0, None)
+def run_with_resume(plan: SpreadPlan) -> dict:
+    """Run the plan's ``spread.in`` in its folder and return LIGGGHTS' log (:func:`run`).
+
+    With ``checkpoints_per_run`` > 0, LIGGGHTS writes restart files to ``checkpoint/`` during the
+    travel, stamped with the fresh input's hash; a later call for the same input resumes from the
+    newest one that loads (e.g. after a cluster's time limit killed the job). A checkpoint that fails
+    to load is skipped; a fresh start clears the checkpoints and feed records of any other input."""
+    out, s = plan.out, plan.s
+    fresh = plan.render(0, None)
     fingerprint = hashlib.sha256(fresh.encode()).hexdigest()
     for step, restart in _checkpoints(out, fingerprint) + [(0, None)]:
         if restart is None:  # a fresh start: forget any other input's checkpoints and feed records
@@ -377,17 +406,23 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
                 shutil.rmtree(out / folder, ignore_errors=True)
                 (out / folder).mkdir()
             (out / CHECKPOINT_DIR / "input.sha256").write_text(fingerprint)
-        (out / "spread.in").write_text(fresh if restart is None else render_from(step, restart))
+        (out / "spread.in").write_text(fresh if restart is None else plan.render(step, restart))
         try:
-            log = ran(run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks), out / "spread.in")
-            break
+            return ran(run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks), out / "spread.in")
         except LiggghtsError as err:
             if restart is None:
                 raise
             print(f"warning: resuming from {restart} failed, trying an older checkpoint or a fresh start:\n{err}",
                   file=sys.stderr)
+    raise AssertionError("unreachable: the fresh start returns or raises")
+
+
+def check_spread(plan: SpreadPlan, log: dict) -> dict:
+    """The health of a finished spread (its log and ``final.dump.part``) and its cost: the summary
+    ``health.json`` holds. An unsound run raises :class:`~analysis.dem.liggghts.LiggghtsError`."""
+    s, out, skips = plan.s, plan.out, plan.skips
     check_timestep(log, s)
-    health = check_kinetic_energy(log, wall_speed=wall_speed,
+    health = check_kinetic_energy(log, wall_speed=plan.wall_speed,
                                   squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
     health.update(inrun_health(log, s))
     if not (out / "final.dump.part").is_file():
@@ -395,7 +430,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
         raise LiggghtsError(f"LIGGGHTS ended (exit 0, no ERROR line) without writing {out / 'final.dump.part'}; "
                             f"last screen lines:\n{tail}")
     atoms = read_dump(out / "final.dump.part").atoms
-    inside = through_roller(atoms, x0 + speed * travel_steps * s.timestep, context["roller_z"], s.roller_radius)
+    inside = through_roller(atoms, plan.step_x(plan.travel_steps), plan.context["roller_z"], s.roller_radius)
     if inside:
         raise LiggghtsError(f"unsound run: {inside} particles passed through the roller (centre inside it): "
                             "lower the time step or stiffen the particles")
@@ -403,29 +438,58 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     # the powder ahead of the stopped roller, and what rolled on under it during the rest phase
     removed = ahead + int(log["printed"]["escaped_past_roller"]) if "remove_ahead" in skips else 0
     # particles fed before a resumed attempt are in its first thermo row
-    fed = int(log["thermo"]["Atoms"].iloc[0]) - len(atoms0) + int(log["inserted"])
+    fed = int(log["thermo"]["Atoms"].iloc[0]) - plan.settled_particles + int(log["inserted"])
     health.update(through_roller=inside, fed_particles=fed,
-                  **layer_health(atoms, s, meshes / "substrate.stl", len(atoms0) + fed - removed))
+                  **layer_health(atoms, s, plan.meshes / "substrate.stl", plan.settled_particles + fed - removed))
     health.update(heap_supply(ahead, s.heap_particles), removed_ahead_of_roller=removed,
                   mass_ahead_of_roller_kg=float(log["printed"]["mass_ahead_of_roller_kg"]))
+    feeds = plan.feeds
     if feeds:
-        landings = feed_landings(out / FEED_DIR, log["printed"], lambda step: x0 + speed * step * s.timestep,
-                                 dict(zip(feeds, feeds[1:] + [travel_steps])))
+        landings = feed_landings(out / FEED_DIR, log["printed"], plan.step_x,
+                                 dict(zip(feeds, feeds[1:] + [plan.travel_steps])))
         landings.to_csv(out / "feed_landings.csv", index=False)
-        health.update(feed_topups=len(feeds), **feed_health(landings, atoms, first_fed_id, s.sampling_region))
+        health.update(feed_topups=len(feeds), **feed_health(landings, atoms, plan.first_fed_id, s.sampling_region))
     thermo = log["thermo"]
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
     # particle-steps of every particle integrated during the run (the pile included), per CPU second
     particle_steps = float(np.sum(np.diff(thermo["Step"].to_numpy()) * thermo["Atoms"].to_numpy()[1:]))
-    summary = {"U_mm_s": U_mm_s, "omega_rad_s": omega_rad_s, "wall_s": log["wall_s"], "cpu_s": log["cpu_s"],
-               "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
-               "mpi_launcher": log["launcher"], "processors": context["processors"],
-               "roller_start_m": x0, "roller_travel_m": speed * travel_steps * s.timestep,
-               "rayleigh_fraction": log["measured_max_rayleigh_fraction"],
-               "hertz_fraction": log["measured_max_hertz_fraction"],
-               "particle_steps": particle_steps, "particle_steps_per_s": particle_steps / max(log["cpu_s"], 1e-9),
-               **{f"time_{part}_s": seconds for part, seconds in log["timing_s"].items()},
-               **{k: v for k, v in gap.items() if k != "circumradius_m"}, **health}
+    return {"U_mm_s": plan.U_mm_s, "omega_rad_s": plan.omega_rad_s, "wall_s": log["wall_s"], "cpu_s": log["cpu_s"],
+            "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
+            "mpi_launcher": log["launcher"], "processors": plan.context["processors"],
+            "roller_start_m": plan.x0, "roller_travel_m": plan.speed * plan.travel_steps * s.timestep,
+            "rayleigh_fraction": log["measured_max_rayleigh_fraction"],
+            "hertz_fraction": log["measured_max_hertz_fraction"],
+            "particle_steps": particle_steps, "particle_steps_per_s": particle_steps / max(log["cpu_s"], 1e-9),
+            **{f"time_{part}_s": seconds for part, seconds in log["timing_s"].items()},
+            **{k: v for k, v in plan.gap.items() if k != "circumradius_m"}, **health}
+
+
+def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: str | Path,
+           settled: str | Path, outdir: str | Path, movie_every: int = 0, skips=SKIPS, replicate: int = 0) -> dict:
+    """Spread the settled heap at ``U_mm_s`` [mm/s] and ``omega_rad_s`` [rad/s]: plan it
+    (:func:`plan_spread`), run it, resuming a killed attempt (:func:`run_with_resume`), check it
+    (:func:`check_spread`).
+
+    Writes ``spread.in``, ``spread.log``, ``final.dump`` and ``health.json``
+    into ``outdir`` and returns the health figures (with wall time and steps).
+
+    With ``checkpoints_per_run`` > 0 in the fidelity level, LIGGGHTS writes
+    restart files to ``outdir/checkpoint/`` during the travel; a later call
+    for the same input (same rendered text) resumes from the newest one that
+    loads, e.g. after a cluster's time limit killed the job. Continuing the
+    roller's motion from a restart is LIGGGHTS' own (``fix move/mesh`` stores
+    it); a checkpoint that fails to load is skipped, and the run starts over.
+
+    With ``feed_pile_mg_per_mm`` in the fidelity level, the pile ahead of the
+    roller is topped up to that mass every :data:`FEED_EVERY` of travel
+    (:func:`feed_plan`, :func:`feed_zone`): the layer is laid from a pile of
+    a set size, however much the roller lays; ``fed_particles`` in the
+    health counts what was added. ``replicate`` seeds the feed.
+    """
+    plan = plan_spread(config, level, U_mm_s, omega_rad_s, meshes, settled, outdir, movie_every, skips, replicate)
+    out = plan.out
+    out.mkdir(parents=True, exist_ok=True)
+    summary = check_spread(plan, run_with_resume(plan))
     _publish(out, summary, "final.dump")
     for folder in (CHECKPOINT_DIR, FEED_DIR):
         shutil.rmtree(out / folder, ignore_errors=True)
