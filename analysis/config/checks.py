@@ -34,6 +34,7 @@ MAX_SUBSTRATE_NODES = 10_000_000
 #: The roller's surface moves at most this fraction of the smallest particle's radius in a time step.
 MAX_WALL_STEP = 0.1
 
+
 def check_config(config: dict, base_dir: Path = Path(".")) -> None:
     """Cross-key checks the schema cannot express, then the sweep's (:func:`check_sweep`)."""
     check_physics(config, base_dir)

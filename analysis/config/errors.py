@@ -6,7 +6,6 @@ class ConfigError(ValueError):
     """A configuration value is wrong; the message names its key and value."""
 
 
-
 def refuse(key: str, value, why: str):
     """Raise :class:`ConfigError`: ``config key '<key>' = <value>: <why>``."""
     raise ConfigError(f"config key {key!r} = {value!r}: {why}")

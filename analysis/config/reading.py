@@ -141,4 +141,3 @@ def validate_schema(config: dict) -> None:
         error = errors[0]
         key = ".".join(str(p) for p in error.absolute_path) or "<top level>"
         raise ConfigError(f"config key {key!r}: {error.message} (value: {error.instance!r})")
-

@@ -35,6 +35,7 @@ def sweep_axes(config: dict) -> list[str]:
     """The sweep's extra axes: config keys by dotted path (``roller.gap_um``), in the order written."""
     return [k for k in config["sweep"] if k not in SWEEP_KEYS]
 
+
 def config_value(config: dict, key: str):
     """The config's value at a dotted key (``roller.gap_um``); None where there is none."""
     node = config
