@@ -38,8 +38,8 @@ import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from analysis.columns import METRICS
 from analysis.config import load_config
-from analysis.metrics.dataset import METRICS
 from analysis.surrogate.adaptive import ACQUISITIONS, WorkflowEvaluator, initial_design, run_adaptive, sweep_bounds
 from analysis.surrogate.candidates import CANDIDATES, make_candidate
 from analysis.surrogate.data import inputs_of, targets_of

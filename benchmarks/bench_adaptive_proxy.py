@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.columns import METRICS
 from analysis.config import load_config
-from analysis.metrics.dataset import METRICS
 from analysis.surrogate.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, targets_of

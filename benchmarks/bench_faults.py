@@ -30,8 +30,8 @@ from pathlib import Path
 import pandas as pd
 from bench_layer_metrics import machine
 
+from analysis.columns import METRICS
 from analysis.faults import campaign, compare_runs, half_written_files
-from analysis.metrics.dataset import METRICS
 from analysis.metrics.noise_floor import pooled_seed_sd, two_run_tolerance
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -43,9 +43,9 @@ import yaml
 from bench_fidelity import measure_layer
 from bench_layer_metrics import machine
 
+from analysis.columns import METRICS
 from analysis.config import load_config
 from analysis.dem.simulate import CHECKPOINT_DIR
-from analysis.metrics.dataset import METRICS
 from analysis.metrics.noise_floor import pooled_seed_sd
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -49,8 +49,8 @@ from pathlib import Path
 import pandas as pd
 from bench_layer_metrics import machine
 
+from analysis.columns import METRICS
 from analysis.faults import compare_runs, half_written_files
-from analysis.metrics.dataset import METRICS
 from analysis.metrics.noise_floor import pooled_seed_sd, two_run_tolerance
 from analysis.slurm_cluster import OneNodeCluster, job_table, missing_commands, snakemake_job_events
 

@@ -5,8 +5,8 @@ import pandas as pd
 import pytest
 import yaml
 
+from analysis.columns import METRICS
 from analysis.config import ConfigError, load_config, run_name, runs_by_name
-from analysis.metrics.dataset import METRICS
 from analysis.surrogate.adaptive import (
     WorkflowEvaluator,
     check_settings,

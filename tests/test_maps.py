@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from conftest import synthetic_dataset, synthetic_metrics
 
-from analysis.metrics.dataset import METRICS
+from analysis.columns import METRICS
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, split_table, targets_of
 from analysis.surrogate.intervals import CalibratedSurrogate

@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from analysis.columns import input_columns, input_units
 from analysis.config import (
     ConfigError,
     heap_config,
@@ -26,7 +27,7 @@ from analysis.config import (
     sweep_runs,
     variants,
 )
-from analysis.metrics.dataset import build_dataset, input_columns, input_units, point_groups, point_means
+from analysis.metrics.dataset import build_dataset, point_groups, point_means
 from analysis.surrogate.data import inputs_of, split_runs
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -66,9 +66,9 @@ import yaml
 from scipy.linalg import solve_triangular
 from scipy.stats import qmc
 
+from analysis.columns import METRICS, SHORT_NAMES, input_columns, input_units
 from analysis.config import PROJECT_DIR, SPEED_AXES, load_config, runs_at, sweep_axes
 from analysis.io import USER_ERRORS, atomic_path, error_line
-from analysis.metrics.dataset import METRICS, SHORT_NAMES, input_columns, input_units
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, targets_of
 from analysis.surrogate.intervals import calibrated_from_predictions, relative_noise

@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 from sklearn.model_selection import GroupKFold, GroupShuffleSplit, LeaveOneGroupOut
 
-from analysis.metrics.dataset import INPUTS, METRICS, input_columns, input_units, point_groups
+from analysis.columns import INPUTS, METRICS, input_columns, input_units
+from analysis.metrics.dataset import point_groups
 
 
 def split_runs(df, n_test, seed):
@@ -96,7 +97,7 @@ def read_split(path, df):
 
 def inputs_of(df):
     """(n, k) float array of the inputs: U [mm/s], omega [rad/s], then the extra axes
-    (:func:`analysis.metrics.dataset.input_columns`, their config units)."""
+    (:func:`analysis.columns.input_columns`, their config units)."""
     return df[input_columns(df)].to_numpy(float)
 
 

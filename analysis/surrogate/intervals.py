@@ -49,7 +49,8 @@ import math
 import numpy as np
 import pandas as pd
 
-from analysis.metrics.dataset import METRICS, input_columns, point_groups
+from analysis.columns import METRICS, input_columns
+from analysis.metrics.dataset import point_groups
 from analysis.surrogate.candidates import GPSurrogate
 
 #: The four metrics and the two products of the hybrid indices (throughput: Q_s M_s, defect: R_q Phi).

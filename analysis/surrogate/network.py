@@ -51,7 +51,8 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 from threadpoolctl import threadpool_limits
 
-from analysis.metrics.dataset import METRICS, input_columns, point_groups
+from analysis.columns import METRICS, input_columns
+from analysis.metrics.dataset import point_groups
 from analysis.surrogate.data import _check_dataset, _names, inputs_of, point_folds, split_runs, targets_of
 from analysis.surrogate.scores import _MAPE_NOTE, R_TARGET, _score_text, regression_scores
 

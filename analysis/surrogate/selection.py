@@ -46,8 +46,9 @@ import pandas as pd
 from joblib import Parallel, delayed
 from scipy.stats import norm
 
+from analysis.columns import METRICS, input_columns
 from analysis.io import atomic_path
-from analysis.metrics.dataset import METRICS, input_columns, point_groups
+from analysis.metrics.dataset import point_groups
 from analysis.surrogate.candidates import CANDIDATES, GPSurrogate, make_candidate, refit_warm
 from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, targets_of
 from analysis.surrogate.intervals import (

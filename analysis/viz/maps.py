@@ -33,9 +33,10 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 
+from analysis.columns import INPUTS, METRICS, SHORT_NAMES, input_columns, input_units
 from analysis.config import variant_path
 from analysis.io import atomic_path
-from analysis.metrics.dataset import INPUTS, METRICS, SHORT_NAMES, input_columns, input_units, point_means
+from analysis.metrics.dataset import point_means
 from analysis.surrogate.data import inputs_of
 from analysis.surrogate.predict import (
     hybrid_indices,
@@ -123,7 +124,7 @@ class MapView:
         (y, x): the paper's ``("U_mm_s", "omega_rad_s")``: U along the surface's depth and the
         interval map's height, omega across; any two of ``inputs``.
     inputs : tuple of str
-        The model's inputs in its order (:func:`analysis.metrics.dataset.input_columns`).
+        The model's inputs in its order (:func:`analysis.columns.input_columns`).
     held : tuple of (str, float)
         The value of every other input, in its units.
     """
