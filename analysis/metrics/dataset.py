@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 
 from analysis.columns import METRICS, input_columns
-from analysis.dem.health import MAX_OVERLAP
 from analysis.io import atomic_path
+from analysis.physics import MAX_OVERLAP
 
 #: The keys of a run's ``health.json`` its dataset row carries.
 HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller",
