@@ -38,11 +38,14 @@ import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from analysis.adaptive_workflow import WorkflowEvaluator
 from analysis.columns import METRICS
 from analysis.config import load_config
-from analysis.surrogate.adaptive import ACQUISITIONS, WorkflowEvaluator, initial_design, run_adaptive, sweep_bounds
+from analysis.surrogate.acquisition import ACQUISITIONS
+from analysis.surrogate.adaptive import run_adaptive
 from analysis.surrogate.candidates import CANDIDATES, make_candidate
 from analysis.surrogate.data import inputs_of, targets_of
+from analysis.surrogate.design_space import initial_design, sweep_bounds
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -35,9 +35,11 @@ import pandas as pd
 
 from analysis.columns import METRICS
 from analysis.config import load_config
-from analysis.surrogate.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds
+from analysis.surrogate.acquisition import ACQUISITIONS
+from analysis.surrogate.adaptive import run_adaptive
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, targets_of
+from analysis.surrogate.design_space import initial_design, sweep_bounds
 from benchmarks.bench_adaptive import cpu_model, subgrids
 
 ROOT = Path(__file__).resolve().parent.parent
