@@ -18,7 +18,7 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
-from analysis.surrogate.network import MetricsRegressor, _convergence_messages, make_surrogate
+from analysis.surrogate.network import MetricsRegressor, convergence_messages, make_surrogate
 
 #: Candidate names and what they are (for tables and the report).
 CANDIDATES = {
@@ -196,7 +196,7 @@ def refit_warm(ensemble, X, y):
         ys = target.transformer_.fit_transform(model._shaped(Y).reshape(len(Y), -1))
         restarted = target.regressor_
         net = restarted.best_.set_params(warm_start=True)
-        with _convergence_messages() as messages, threadpool_limits(1, user_api="blas"):
+        with convergence_messages() as messages, threadpool_limits(1, user_api="blas"):
             net.fit(Xs, ys if ys.shape[1] > 1 else ys[:, 0])
         restarted.loss_, restarted.n_iter_, restarted.losses_ = net.loss_, net.n_iter_, [float(net.loss_)]
         restarted.convergence_warnings_ = messages

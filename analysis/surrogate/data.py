@@ -106,14 +106,16 @@ def targets_of(df):
     return df[list(METRICS)].to_numpy(float)
 
 
-def _names(df=None):
+def column_metadata(df=None):
     """Input (in model order: those of ``df``, default the speeds) and metric columns with their
     units, for scores and metadata."""
     return {"inputs": input_units(list(INPUTS) if df is None else input_columns(df)),
             "metrics": {m: {"symbol": s, "unit": u} for m, (s, u) in METRICS.items()}}
 
 
-def _check_dataset(df):
+def check_dataset(df):
+    """Raise KeyError naming the input or metric columns ``df`` lacks, ValueError naming the rows whose
+    inputs or metrics are missing or not finite: what a model can be fitted on."""
     missing = [c for c in (*input_columns(df), *METRICS) if c not in df.columns]
     if missing:
         raise KeyError(f"dataset lacks columns: {', '.join(missing)}")
