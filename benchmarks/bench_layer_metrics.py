@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.metrics.dump import read_dump, write_dump
-from analysis.metrics.profilometer import spread_layer_metrics
+from analysis.metrics.spread_layer import spread_layer_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 

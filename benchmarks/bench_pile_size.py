@@ -27,7 +27,7 @@ import yaml
 from analysis.config import load_config, run_name, scene
 from analysis.dem.simulate import spread
 from analysis.metrics.dump import read_dump
-from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -24,8 +24,8 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from analysis.config import ConfigError, coerce_cli_values, load_config, scene, sweep_runs
+from analysis.measure import main as layer_metrics_main
 from analysis.metrics.dump import DumpError, read_dump, write_dump
-from analysis.metrics.profilometer import main as layer_metrics_main
 from tests.test_config import ROOT
 
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "150"))
