@@ -275,8 +275,8 @@ class CalibratedSurrogate:
 
         Parameters
         ----------
-        X : array_like, shape (n, 2)
-            U (mm/s), omega (rad/s).
+        X : array_like, shape (n, k)
+            U (mm/s), omega (rad/s), then any extra axes (config units), in the model's input order.
         confidence : float, optional
             Coverage level (default ``self.confidence``).
         kind : {"run", "mean"}

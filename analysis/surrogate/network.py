@@ -124,7 +124,8 @@ class RestartedMLP(MetricsRegressor):
         self.n_init = n_init
 
     def fit(self, X, y):
-        """Fit ``n_init`` networks on X (n, 2) and y (n, 4); keep the lowest loss.
+        """Fit ``n_init`` networks on X (n, k) (U, omega, then any extra axes) and y (n, 4); keep the
+        lowest loss.
 
         BLAS runs single-threaded here: the matrices are tiny (tens of runs
         by 200 units), and with other jobs on the cores OpenBLAS's threads
