@@ -1,6 +1,8 @@
-"""The adaptive design through the Snakemake workflow: each round's points become a config
-(:func:`round_config`) and a Snakemake run in a subprocess that simulates only the new runs
-(:class:`WorkflowEvaluator`); the loop itself is :func:`analysis.surrogate.adaptive.run_adaptive`.
+"""Adaptive Design of Simulations: fewer DEM runs for the same map, through the Snakemake workflow.
+
+Each round's points become a config (:func:`round_config`) and a Snakemake run in a subprocess
+that simulates only the new runs (:class:`WorkflowEvaluator`); the loop itself is
+:func:`analysis.surrogate.adaptive.run_adaptive`.
 
 Command line::
 
