@@ -1,6 +1,6 @@
 """Physics helpers in SI units: Rayleigh time, the particle size classes of
-the Gaussian PSD, the roller's motion, LIGGGHTS' prime seeds, and the length
-a fed pile of a given mass per width occupies.
+the Gaussian PSD, the roller's motion, LIGGGHTS' prime seeds, the length
+a fed pile of a given mass per width occupies, and the largest tolerated overlap.
 """
 from __future__ import annotations
 
@@ -18,6 +18,13 @@ PILE_SOLID_FRACTION = 0.55
 
 #: The feed zone holds this many times the fed pile's bulk volume (room for its slope and toe).
 FEED_ZONE_ROOM = 2.0
+
+
+#: Largest tolerated particle-particle overlap in the sampling region (what is measured), as a
+#: fraction of the smaller radius: the soft-sphere contact's limit for a sound layer. The run's
+#: health (:func:`analysis.dem.health.layer_health`) and the dataset's check of each run
+#: (:func:`analysis.metrics.dataset.check_run`) both hold runs to it.
+MAX_OVERLAP = 0.05
 
 
 def rayleigh_time(radius: float, density: float, youngs_modulus: float, poisson_ratio: float) -> float:

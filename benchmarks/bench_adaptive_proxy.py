@@ -36,11 +36,13 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
+from analysis.columns import METRICS  # noqa: E402
 from analysis.config.load import load_config  # noqa: E402
-from analysis.metrics.dataset import METRICS  # noqa: E402
-from analysis.surrogate.adaptive import ACQUISITIONS, initial_design, run_adaptive, sweep_bounds  # noqa: E402
+from analysis.surrogate.acquisition import ACQUISITIONS  # noqa: E402
+from analysis.surrogate.adaptive import run_adaptive  # noqa: E402
 from analysis.surrogate.candidates import GPSurrogate  # noqa: E402
 from analysis.surrogate.data import inputs_of, targets_of  # noqa: E402
+from analysis.surrogate.design_space import initial_design, sweep_bounds  # noqa: E402
 from benchmarks.bench_adaptive import subgrids  # noqa: E402
 from benchmarks.machine import cpu_model  # noqa: E402
 

@@ -38,7 +38,7 @@ from analysis.config.load import load_config
 from analysis.dem.liggghts import LiggghtsError, children_cpu
 from analysis.dem.simulate import make_geometry, settle, spread
 from analysis.metrics.dump import read_dump
-from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -40,8 +40,8 @@ from scipy.stats import norm
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]     # `benchmarks` (run as a script); tests' synthetic data
 
+from analysis.columns import METRICS  # noqa: E402
 from analysis.config.load import load_config  # noqa: E402
-from analysis.metrics.dataset import METRICS  # noqa: E402
 from analysis.metrics.noise_floor import POOLED  # noqa: E402
 from analysis.surrogate.data import inputs_of, point_folds, targets_of  # noqa: E402
 from analysis.surrogate.intervals import calibrated_from_predictions, interval_score, relative_noise  # noqa: E402

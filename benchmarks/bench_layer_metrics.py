@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
 from analysis.metrics.dump import read_dump, write_dump  # noqa: E402
-from analysis.metrics.profilometer import spread_layer_metrics  # noqa: E402
+from analysis.metrics.spread_layer import spread_layer_metrics  # noqa: E402
 from benchmarks.machine import machine  # noqa: E402
 
 SIDE = 25e-3  # region side [m]

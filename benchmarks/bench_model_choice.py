@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from conftest import synthetic_dataset  # noqa: E402
 
-from analysis.metrics.dataset import METRICS  # noqa: E402
+from analysis.columns import METRICS  # noqa: E402
 from analysis.surrogate.network import format_spread, test_r_spread  # noqa: E402
 from analysis.surrogate.selection import choose_model, cross_validate_models, min_coverage_pct  # noqa: E402
 

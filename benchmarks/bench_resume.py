@@ -44,9 +44,9 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
+from analysis.columns import METRICS  # noqa: E402
 from analysis.config.load import load_config  # noqa: E402
 from analysis.dem.simulate import CHECKPOINT_DIR  # noqa: E402
-from analysis.metrics.dataset import METRICS  # noqa: E402
 from analysis.metrics.noise_floor import pooled_seed_sd  # noqa: E402
 from benchmarks.bench_fidelity import measure_layer  # noqa: E402
 from benchmarks.machine import machine  # noqa: E402

@@ -44,7 +44,7 @@ from analysis.config.fidelity import scene
 from analysis.config.load import load_config
 from analysis.metrics.deposit import deposit_profile, pile_ahead, profile_figure, run_profiles, steady_state_start
 from analysis.metrics.dump import read_dump
-from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units
 
 ROOT = Path(__file__).resolve().parent.parent
 

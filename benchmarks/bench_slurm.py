@@ -51,7 +51,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-from analysis.metrics.dataset import METRICS  # noqa: E402
+from analysis.columns import METRICS  # noqa: E402
 from analysis.metrics.noise_floor import pooled_seed_sd, two_run_tolerance  # noqa: E402
 from benchmarks.faults import compare_runs, half_written_files  # noqa: E402
 from benchmarks.machine import machine  # noqa: E402

@@ -6,7 +6,7 @@ from analysis.config.reading import PROJECT_DIR
 from analysis.config.sweep import run_config
 from analysis.io import write_json
 from analysis.metrics.dump import read_dump
-from analysis.metrics.profilometer import spread_layer_metrics, to_report_units
+from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units
 from analysis.rule import rule_context
 from analysis.viz.views import write_vtk
 

@@ -5,23 +5,14 @@ import pandas as pd
 import pytest
 import yaml
 
+from analysis.adaptive_workflow import WorkflowEvaluator, main, round_config
+from analysis.columns import METRICS
 from analysis.config.errors import ConfigError
 from analysis.config.load import load_config
 from analysis.config.sweep import run_name, runs_by_name
-from analysis.metrics.dataset import METRICS
-from analysis.surrogate.adaptive import (
-    WorkflowEvaluator,
-    check_settings,
-    choose_batch,
-    initial_design,
-    lattice,
-    main,
-    round_config,
-    run_adaptive,
-    snap,
-    sweep_bounds,
-    sweep_resolution,
-)
+from analysis.surrogate.acquisition import choose_batch
+from analysis.surrogate.adaptive import check_settings, run_adaptive
+from analysis.surrogate.design_space import initial_design, lattice, snap, sweep_bounds, sweep_resolution
 from tests.test_config import ROOT
 
 BOUNDS = ((40.0, 100.0), (-20.0, 20.0))
@@ -164,7 +155,7 @@ def test_choose_batch_spreads_a_batch_out():
 
 def test_imse_is_the_brute_force_drop_of_the_mean_variance():
     """The closed-form integrated variance reduction equals refitting the variance with the run added."""
-    from analysis.surrogate.adaptive import _reference, _variance_reduction
+    from analysis.surrogate.acquisition import _reference, _variance_reduction
     from analysis.surrogate.candidates import GPSurrogate
     X = initial_design(8, BOUNDS, RES, seed=2)
     Y = np.column_stack([corner_feature(*X.T), broad_feature(*X.T), X[:, 0], X[:, 1] ** 2])

@@ -328,7 +328,7 @@ def layer_metrics(*argv):
     import contextlib
     import io
 
-    from analysis.metrics.profilometer import main
+    from analysis.measure import main
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         status = main([str(a) for a in argv])

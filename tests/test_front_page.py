@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from analysis.metrics.dataset import METRICS
+from analysis.columns import METRICS
 from analysis.viz.front_page import front_page_rst
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -28,8 +28,8 @@ from analysis.config.fidelity import scene
 from analysis.config.load import load_config
 from analysis.config.reading import coerce_cli_values
 from analysis.config.sweep import sweep_runs
+from analysis.measure import main as layer_metrics_main
 from analysis.metrics.dump import DumpError, read_dump, write_dump
-from analysis.metrics.profilometer import main as layer_metrics_main
 from tests.test_config import ROOT
 
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "150"))

@@ -21,7 +21,8 @@ from analysis.surrogate.intervals import (
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.recommend import main, recommend
 from analysis.surrogate.selection import choose_model, cross_validate_models, model_choice_markdown
-from analysis.viz.maps import interval_figure, process_map_figure
+from analysis.viz.process_map import process_map_figure
+from analysis.viz.surfaces import interval_figure
 
 NOISE = 0.05          # relative std of the synthetic runs' noise
 CONFIDENCE = 0.9

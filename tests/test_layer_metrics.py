@@ -32,16 +32,13 @@ import trimesh
 import analysis.metrics.profilometer as lm
 from analysis.io import error_line
 from analysis.metrics.dump import read_dump, write_dump
-from analysis.metrics.profilometer import (
+from analysis.metrics.profilometer import layer_top, periodic_images, probe_lines, substrate_height
+from analysis.metrics.spread_layer import (
     layer_porosity,
     layer_roughness,
-    layer_top,
-    periodic_images,
     powder_mass,
-    probe_lines,
     spread_layer_metrics,
     spread_throughput,
-    substrate_height,
     to_report_units,
 )
 
@@ -422,7 +419,7 @@ def test_frame_box_checked_and_bad_values_rejected(tmp_path):
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "analysis.metrics.profilometer", *map(str, args)], cwd=REPO,
+    return subprocess.run([sys.executable, "-m", "analysis.measure", *map(str, args)], cwd=REPO,
                           capture_output=True, text=True, timeout=60)
 
 
@@ -508,7 +505,7 @@ def test_cli_os_error_is_one_line_naming_the_file_and_keeps_the_old_output(tmp_p
         out.mkdir()
     else:
         out.write_text("old")
-    res = subprocess.run([sys.executable, "-m", "analysis.metrics.profilometer", str(lattice_dump), "--region",
+    res = subprocess.run([sys.executable, "-m", "analysis.measure", str(lattice_dump), "--region",
                           "0", "0.5", "0", "0.5", "--speed", "50", "--density", str(RHO), "--lines", "50",
                           "--json", str(out)], cwd=REPO, capture_output=True, text=True, timeout=60,
                          preexec_fn=_file_size_limit(200) if fault == "full" else None)

@@ -334,7 +334,7 @@ def test_skips_change_the_cost_not_the_layer(smoke, config):
     more or less in the smoke region's ~110 moves its R_q and Phi by about a
     seed sd (measured: 92.5 against 97.9 um, 55.0 against 57.8 %), so they are
     not compared here."""
-    from analysis.metrics.profilometer import spread_layer_metrics
+    from analysis.metrics.spread_layer import spread_layer_metrics
     root, s = smoke["root"], smoke["scene"]
     full = spread(config, "smoke", U_MM_S, OMEGA, root / "meshes", root / "settle", root / "noskips", skips=())
     assert full["removed_ahead_of_roller"] == 0

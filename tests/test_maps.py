@@ -8,13 +8,14 @@ import pandas as pd
 import pytest
 from conftest import synthetic_dataset, synthetic_metrics
 
-from analysis.metrics.dataset import METRICS
+from analysis.columns import METRICS
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, split_table, targets_of
 from analysis.surrogate.intervals import CalibratedSurrogate
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import hybrid_indices, metric_maxima, predict_grid
-from analysis.viz.maps import process_map_lines, render_maps
+from analysis.viz.maps import render_maps
+from analysis.viz.process_map import process_map_lines
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -102,7 +103,9 @@ def test_render_maps_script(fitted, dataset, tmp_path, fake_snakemake):
 
 
 def test_supply_limited_runs_are_ringed_on_the_surfaces_and_the_process_map(fitted, dataset):
-    from analysis.viz.maps import process_map_figure, supply_limited, surface_figure
+    from analysis.viz.figures import supply_limited
+    from analysis.viz.process_map import process_map_figure
+    from analysis.viz.surfaces import surface_figure
     model, scores = fitted
     split = (np.arange(35), np.arange(35, 45))
     limited = dataset.assign(heap_exhausted=dataset["omega_rad_s"] <= -15)
@@ -141,7 +144,7 @@ def _overlaps(a, b):
 def test_process_map_labels_overlap_no_label_and_no_line(which, fitted, dataset, calibrated_gp):
     from matplotlib.path import Path as MplPath
 
-    from analysis.viz.maps import process_map_figure
+    from analysis.viz.process_map import process_map_figure
     model, df = (fitted[0], dataset) if which == "network" else calibrated_gp
     fig = process_map_figure(model, df, (np.arange(35), np.arange(35, 45)), n=61)
     ax = fig.axes[0]
@@ -171,7 +174,7 @@ def frame_contains(frame, box):
 
 def test_operating_window_marks_the_recommended_setting(calibrated_gp):
     from analysis.surrogate.recommend import recommend
-    from analysis.viz.maps import window_figure
+    from analysis.viz.contours import window_figure
     model, df = calibrated_gp
     split = (np.arange(35), np.arange(35, 45))
     meta = {"input_range": {"U_mm_s": [40.0, 100.0], "omega_rad_s": [-20.0, 20.0]}}
@@ -188,7 +191,7 @@ def test_operating_window_marks_the_recommended_setting(calibrated_gp):
 
 
 def test_contour_map_shows_the_runs(calibrated_gp):
-    from analysis.viz.maps import contour_figure
+    from analysis.viz.contours import contour_figure
     model, df = calibrated_gp
     fig = contour_figure(model, df, (np.arange(35), np.arange(35, 45)), "roughness_um", n=21)
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
@@ -198,7 +201,7 @@ def test_contour_map_shows_the_runs(calibrated_gp):
 
 def test_a_smooth_model_draws_the_lines_when_the_trees_are_chosen(fit_params):
     from analysis.surrogate.selection import cross_validate_models, smooth_stand_in
-    from analysis.viz.maps import process_map_figure
+    from analysis.viz.process_map import process_map_figure
     df = synthetic_dataset(2, noise=0.03)
     params = {**fit_params, "models": ["trees", "gp"], "cv_repeats": 1, "cv_loo": False, "gp_restarts": 0,
               "tree_count": 20}

@@ -9,7 +9,8 @@ import pandas as pd
 import pytest
 from conftest import synthetic_dataset, synthetic_metrics
 
-from analysis.metrics.dataset import METRICS, point_groups, point_means
+from analysis.columns import METRICS
+from analysis.metrics.dataset import point_groups, point_means
 from analysis.metrics.noise_floor import POOLED, accuracy_ceiling, noise_floor, noise_floor_markdown, two_run_tolerance
 from analysis.surrogate.candidates import GPSurrogate, MLPEnsemble, TreeEnsemble, make_candidate, refit_warm
 from analysis.surrogate.data import inputs_of, point_folds, split_runs, targets_of

@@ -12,7 +12,7 @@ import sklearn
 from conftest import synthetic_dataset
 from sklearn.exceptions import ConvergenceWarning
 
-from analysis.metrics.dataset import METRICS
+from analysis.columns import METRICS
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, read_split, split_runs, split_table
 from analysis.surrogate.network import deviation_from_paper, fit_surrogate

@@ -15,11 +15,12 @@ import pandas as pd
 import pytest
 import yaml
 
+from analysis.columns import input_columns, input_units
 from analysis.config.errors import ConfigError
 from analysis.config.fidelity import scene
 from analysis.config.load import load_config
 from analysis.config.sweep import heap_config, run_config, simulation_fingerprint, sweep_points, sweep_runs, variants
-from analysis.metrics.dataset import build_dataset, input_columns, input_units, point_groups, point_means
+from analysis.metrics.dataset import build_dataset, point_groups, point_means
 from analysis.surrogate.data import inputs_of, split_runs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -348,7 +349,8 @@ def test_maps_over_a_third_axis_are_drawn_per_value(gap_model, tmp_path):
 def test_a_map_over_any_pair_predicts_at_the_right_inputs(gap_model):
     """A (U, gap) map with omega held: each grid node is the model's prediction at the full input
     (U, omega, gap) in the model's order, and the iso-lines are the two mapped inputs'."""
-    from analysis.viz.maps import MapView, process_map_lines
+    from analysis.viz.figures import MapView
+    from analysis.viz.process_map import process_map_lines
     model, _, df = gap_model
     view = MapView(("U_mm_s", "roller.gap_um"), ("U_mm_s", "omega_rad_s", "roller.gap_um"), (("omega_rad_s", -10.0),))
     grid = view.grid(model, (40, 100), (300, 400), 5)
@@ -366,7 +368,8 @@ def test_a_map_over_any_pair_predicts_at_the_right_inputs(gap_model):
 
 def test_maps_over_a_chosen_pair_hold_or_panel_the_other_inputs(gap_model, tmp_path):
     from analysis.metrics.dataset import point_means
-    from analysis.viz.maps import map_views, process_map_figure, render_maps
+    from analysis.viz.maps import map_views, render_maps
+    from analysis.viz.process_map import process_map_figure
     model, _, df = gap_model
     points, _ = point_means(df)
     # (U, gap): one set per omega (5), 5 x 3 points in each

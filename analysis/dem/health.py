@@ -19,19 +19,17 @@ from analysis.dem import geometry
 from analysis.dem.liggghts import LiggghtsError
 from analysis.metrics.dump import read_dump
 from analysis.metrics.profilometer import substrate_height
+from analysis.physics import MAX_OVERLAP
 
 #: A particle counts as "through the substrate" when its centre is this many
 #: radii below the substrate surface under it.
 BELOW_SUBSTRATE_RADII = 0.5
 
 
-#: Largest tolerated particle-particle overlap, as a fraction of the smaller
-#: radius: in the sampling region (what is measured), and anywhere. Particles
-#: jammed under the kinematic roller, ahead of the region, are squeezed far
-#: harder (20 % seen at U = 40 mm/s); past 50 % spheres pass through each other.
-MAX_OVERLAP = 0.05
-
-
+#: Largest tolerated particle-particle overlap anywhere, as a fraction of the smaller radius
+#: (in the sampling region: :data:`analysis.physics.MAX_OVERLAP`). Particles jammed under the
+#: kinematic roller, ahead of the region, are squeezed far harder (20 % seen at U = 40 mm/s);
+#: past 50 % spheres pass through each other.
 MAX_OVERLAP_ANYWHERE = 0.5
 
 

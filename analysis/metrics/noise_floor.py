@@ -19,8 +19,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from analysis.columns import METRICS, input_columns, point_label
 from analysis.io import atomic_path
-from analysis.metrics.dataset import METRICS, input_columns, point_groups, point_label, point_means
+
+#: Row label of the pooled summary in the noise-floor table.
+from analysis.metrics.dataset import point_groups, point_means
 
 #: Row label of the pooled summary in the noise-floor table.
 POOLED = "pooled"

@@ -18,7 +18,7 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
-from analysis.surrogate.network import MetricsRegressor, _convergence_messages, make_surrogate
+from analysis.surrogate.network import MetricsRegressor, convergence_messages, make_surrogate
 
 #: Candidate names and what they are (for tables and the report).
 CANDIDATES = {
@@ -29,11 +29,13 @@ CANDIDATES = {
 
 
 class GPSurrogate(MetricsRegressor):
-    """One Gaussian process per metric over standardised (U, omega), anisotropic RBF + noise.
+    """One Gaussian process per metric over the standardised inputs, anisotropic RBF + noise.
 
-    Kernel of each metric (on standardised inputs and targets):
-    ``ConstantKernel(1) * RBF([1, 1]) + WhiteKernel(0.1)``, hyperparameters by
-    maximum marginal likelihood (``n_restarts`` extra random starts).
+    The inputs are any number k of columns: U, omega and a sweep's extra axes
+    (:func:`analysis.surrogate.data.inputs_of`).  Kernel of each metric (on
+    standardised inputs and targets): ``ConstantKernel(1) * RBF([1] * k) +
+    WhiteKernel(0.1)``, one length scale per input, hyperparameters by maximum
+    marginal likelihood (``n_restarts`` extra random starts).
 
     Parameters
     ----------
@@ -50,8 +52,9 @@ class GPSurrogate(MetricsRegressor):
     ----------
     gps_ : list of GaussianProcessRegressor
         The fitted processes, one per metric.
-    length_scales_ : numpy.ndarray, shape (4, 2)
-        Fitted length scales per metric in input units (mm/s, rad/s).
+    length_scales_ : numpy.ndarray, shape (4, k)
+        Fitted length scales per metric in input units (U mm/s, omega rad/s, an extra axis
+        in its config units).
     noise_std_ : numpy.ndarray, shape (4,)
         Fitted run-to-run noise (white kernel) per metric, metric units.
     convergence_warnings_ : int
@@ -73,7 +76,8 @@ class GPSurrogate(MetricsRegressor):
                 + WhiteKernel(0.1, tuple(self.noise_bounds)))
 
     def fit(self, X, y):
-        """Fit on X (n, 2) [mm/s, rad/s] and y (n, 4) [metric units]."""
+        """Fit on X (n, k) [U mm/s, omega rad/s, then any extra axes in their config units] and
+        y (n, 4) [metric units]."""
         X, Y = self._validate_fit(X, y)
         self.x_scaler_ = StandardScaler().fit(X)
         self.y_mean_ = Y.mean(axis=0)
@@ -118,7 +122,7 @@ class GPSurrogate(MetricsRegressor):
         return out
 
     def predict(self, X, return_std=False):
-        """Metrics at X (n, 2); with ``return_std`` also the posterior std of the mean, (n, 4)."""
+        """Metrics (n, 4) at X (n, k); with ``return_std`` also the posterior std of the mean, (n, 4)."""
         X = self._validate_predict(X)
         Xs = self.x_scaler_.transform(X)
         mean = np.column_stack([gp.predict(Xs) for gp in self.gps_]) * self.y_scale_ + self.y_mean_
@@ -161,7 +165,7 @@ class MLPEnsemble(MetricsRegressor):
         self.n_members = n_members
 
     def fit(self, X, y):
-        """Fit every member on X (n, 2) [mm/s, rad/s] and y (n, 4)."""
+        """Fit every member on X (n, k) [U mm/s, omega rad/s, then any extra axes] and y (n, 4)."""
         X, Y = self._validate_fit(X, y)
         n_init = int(self.params["n_init"])
         base = int(self.params["random_state"])
@@ -196,7 +200,7 @@ def refit_warm(ensemble, X, y):
         ys = target.transformer_.fit_transform(model._shaped(Y).reshape(len(Y), -1))
         restarted = target.regressor_
         net = restarted.best_.set_params(warm_start=True)
-        with _convergence_messages() as messages, threadpool_limits(1, user_api="blas"):
+        with convergence_messages() as messages, threadpool_limits(1, user_api="blas"):
             net.fit(Xs, ys if ys.shape[1] > 1 else ys[:, 0])
         restarted.loss_, restarted.n_iter_, restarted.losses_ = net.loss_, net.n_iter_, [float(net.loss_)]
         restarted.convergence_warnings_ = messages
@@ -223,7 +227,7 @@ class TreeEnsemble(MetricsRegressor):
         self.min_samples_leaf = min_samples_leaf
 
     def fit(self, X, y):
-        """Fit on X (n, 2) [mm/s, rad/s] and y (n, 4)."""
+        """Fit on X (n, k) [U mm/s, omega rad/s, then any extra axes] and y (n, 4)."""
         X, Y = self._validate_fit(X, y)
         self.y_mean_ = Y.mean(axis=0)
         self.y_scale_ = np.where(Y.std(axis=0) > 0, Y.std(axis=0), 1.0)

@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 from sklearn.model_selection import GroupKFold, GroupShuffleSplit, LeaveOneGroupOut
 
-from analysis.metrics.dataset import INPUTS, METRICS, input_columns, input_units, point_groups
+from analysis.columns import INPUTS, METRICS, input_columns, input_units
+from analysis.metrics.dataset import point_groups
 
 
 def split_runs(df, n_test, seed):
@@ -96,7 +97,7 @@ def read_split(path, df):
 
 def inputs_of(df):
     """(n, k) float array of the inputs: U [mm/s], omega [rad/s], then the extra axes
-    (:func:`analysis.metrics.dataset.input_columns`, their config units)."""
+    (:func:`analysis.columns.input_columns`, their config units)."""
     return df[input_columns(df)].to_numpy(float)
 
 
@@ -105,14 +106,16 @@ def targets_of(df):
     return df[list(METRICS)].to_numpy(float)
 
 
-def _names(df=None):
+def column_metadata(df=None):
     """Input (in model order: those of ``df``, default the speeds) and metric columns with their
     units, for scores and metadata."""
     return {"inputs": input_units(list(INPUTS) if df is None else input_columns(df)),
             "metrics": {m: {"symbol": s, "unit": u} for m, (s, u) in METRICS.items()}}
 
 
-def _check_dataset(df):
+def check_dataset(df):
+    """Raise KeyError naming the input or metric columns ``df`` lacks, ValueError naming the rows whose
+    inputs or metrics are missing or not finite: what a model can be fitted on."""
     missing = [c for c in (*input_columns(df), *METRICS) if c not in df.columns]
     if missing:
         raise KeyError(f"dataset lacks columns: {', '.join(missing)}")

@@ -49,7 +49,8 @@ import math
 import numpy as np
 import pandas as pd
 
-from analysis.metrics.dataset import METRICS, input_columns, point_groups
+from analysis.columns import METRICS, input_columns
+from analysis.metrics.dataset import point_groups
 from analysis.surrogate.candidates import GPSurrogate
 
 #: The four metrics and the two products of the hybrid indices (throughput: Q_s M_s, defect: R_q Phi).
@@ -274,8 +275,8 @@ class CalibratedSurrogate:
 
         Parameters
         ----------
-        X : array_like, shape (n, 2)
-            U (mm/s), omega (rad/s).
+        X : array_like, shape (n, k)
+            U (mm/s), omega (rad/s), then any extra axes (config units), in the model's input order.
         confidence : float, optional
             Coverage level (default ``self.confidence``).
         kind : {"run", "mean"}

@@ -51,9 +51,10 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 from threadpoolctl import threadpool_limits
 
-from analysis.metrics.dataset import METRICS, input_columns, point_groups
-from analysis.surrogate.data import _check_dataset, _names, inputs_of, point_folds, split_runs, targets_of
-from analysis.surrogate.scores import _MAPE_NOTE, R_TARGET, _score_text, regression_scores
+from analysis.columns import METRICS, input_columns
+from analysis.metrics.dataset import point_groups
+from analysis.surrogate.data import check_dataset, column_metadata, inputs_of, point_folds, split_runs, targets_of
+from analysis.surrogate.scores import MAPE_NOTE, R_TARGET, regression_scores, score_text
 
 _MODEL_KEYS = ("hidden_units", "activation", "alpha", "solver",
                "learning_rate_init", "max_iter", "random_state")
@@ -123,7 +124,8 @@ class RestartedMLP(MetricsRegressor):
         self.n_init = n_init
 
     def fit(self, X, y):
-        """Fit ``n_init`` networks on X (n, 2) and y (n, 4); keep the lowest loss.
+        """Fit ``n_init`` networks on X (n, k) (U, omega, then any extra axes) and y (n, 4); keep the
+        lowest loss.
 
         BLAS runs single-threaded here: the matrices are tiny (tens of runs
         by 200 units), and with other jobs on the cores OpenBLAS's threads
@@ -136,7 +138,7 @@ class RestartedMLP(MetricsRegressor):
         fits = []
         for k in range(int(self.n_init)):
             net = clone(mlp).set_params(random_state=seed + k)
-            with _convergence_messages() as messages, threadpool_limits(1, user_api="blas"):
+            with convergence_messages() as messages, threadpool_limits(1, user_api="blas"):
                 net.fit(X, y)
             fits.append((net.loss_, k, net, messages))
         self.loss_, _, self.best_, self.convergence_warnings_ = min(fits, key=lambda f: f[:2])
@@ -219,7 +221,7 @@ def deviation_from_paper(params):
 
 
 @contextmanager
-def _convergence_messages():
+def convergence_messages():
     """Collect ConvergenceWarning messages (one line each); pass other warnings on."""
     messages = []
     with warnings.catch_warnings(record=True) as caught:
@@ -265,26 +267,26 @@ def fit_surrogate(df, params):
     ConvergenceWarning
         If the final fit did not converge (also ``scores["fit"]["converged"]``).
     """
-    _check_dataset(df)
+    check_dataset(df)
     X, Y = inputs_of(df), targets_of(df)
     train, test = split_runs(df, params["n_test"], params["split_seed"])
 
     model = make_surrogate(params)
     t0 = time.perf_counter()
-    with _convergence_messages() as messages:
+    with convergence_messages() as messages:
         model.fit(X[train], Y[train])
     fit_time = time.perf_counter() - t0
     for msg in messages:
         warnings.warn(f"surrogate fit did not converge: {msg}", ConvergenceWarning, stacklevel=2)
 
     folds = point_folds(df, params["cv_folds"], params["split_seed"])
-    with _convergence_messages() as cv_messages:
+    with convergence_messages() as cv_messages:
         Y_cv = cross_val_predict(make_surrogate(params), X, Y, cv=folds)
 
     scores = {
         "sklearn_version": sklearn.__version__,
         "n_runs": len(df),
-        **_names(df),
+        **column_metadata(df),
         "params": {**params, "n_init": int(params["n_init"])},
         "deviation_from_paper": deviation_from_paper(params),
         "fit": {"solver": params["solver"],
@@ -309,10 +311,10 @@ def fit_surrogate(df, params):
                         "pooled": "scores of the out-of-fold predictions of all runs",
                         "converged": not cv_messages,
                         "n_convergence_warnings": len(cv_messages)},
-        "mape_note": _MAPE_NOTE,
+        "mape_note": MAPE_NOTE,
     }
     scores["warnings"] = [
-        f"training R of {m} is {_score_text(s['R'])} < {R_TARGET}: the network under-fits "
+        f"training R of {m} is {score_text(s['R'])} < {R_TARGET}: the network under-fits "
         f"(alpha={params['alpha']} too strong, or training stopped early)"
         for m, s in scores["train"].items() if s["R"] is None or s["R"] < R_TARGET]
     return model, scores
@@ -322,7 +324,7 @@ def _split_test_scores(df, params, seed):
     """Test scores of the network fitted on the seeded paper-style split ``seed``."""
     X, Y = inputs_of(df), targets_of(df)
     train, test = split_runs(df, params["n_test"], seed)
-    with _convergence_messages():
+    with convergence_messages():
         model = make_surrogate(params).fit(X[train], Y[train])
     return regression_scores(Y[test], model.predict(X[test]))
 
@@ -339,7 +341,7 @@ def test_r_spread(df, params, n_splits=20, n_jobs=1):
         JSON-ready: ``n_splits``, ``seeds``, ``n_test``, and per metric ``R_mean``, ``R_sd``
         (ddof 1), ``R_min``, ``R_max`` and ``R`` (every split's, in seed order).
     """
-    _check_dataset(df)
+    check_dataset(df)
     seeds = [int(params["split_seed"]) + k for k in range(int(n_splits))]
     scores = Parallel(n_jobs=n_jobs)(delayed(_split_test_scores)(df, params, s) for s in seeds)
     out = {"n_splits": len(seeds), "seeds": seeds, "n_test": int(params["n_test"]),

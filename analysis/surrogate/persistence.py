@@ -10,7 +10,7 @@ import joblib
 import sklearn
 
 from analysis.io import atomic_path
-from analysis.surrogate.data import _names
+from analysis.surrogate.data import column_metadata
 
 _FORMAT = "spreadmap-surrogate/1"
 
@@ -31,7 +31,7 @@ def save_surrogate(model, path, meta):
         metric names and units (``inputs``, in the model's column order, and
         ``metrics``) unless ``meta`` has them (default inputs: the speeds).
     """
-    meta = {**_names(), **meta, "sklearn_version": sklearn.__version__}
+    meta = {**column_metadata(), **meta, "sklearn_version": sklearn.__version__}
     with atomic_path(path) as tmp:
         joblib.dump({"format": _FORMAT, "model": model, "meta": meta}, tmp)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from analysis.metrics.dataset import METRICS
+from analysis.columns import METRICS
 from analysis.surrogate.intervals import PRODUCTS, interval_frame
 
 

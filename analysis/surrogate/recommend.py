@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.columns import METRICS, SHORT_NAMES, input_units
 from analysis.config.reading import load_schema
 from analysis.io import USER_ERRORS, error_line
-from analysis.metrics.dataset import METRICS, SHORT_NAMES, input_units
 from analysis.surrogate.intervals import check_confidence
 from analysis.surrogate.persistence import load_surrogate
 from analysis.surrogate.predict import predict_frame, provides_intervals

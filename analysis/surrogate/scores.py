@@ -8,14 +8,15 @@ from __future__ import annotations
 import numpy as np
 from sklearn.metrics import r2_score
 
-from analysis.metrics.dataset import METRICS
+from analysis.columns import METRICS
 
 #: The paper's accuracy claim: R >= 0.96 for every metric (section 3).
 R_TARGET = 0.96
 
 
-_MAPE_NOTE = ("MAPE_pct = mean(|simulated - predicted| / |simulated|) x 100 over the runs "
-              "whose simulated value is nonzero (n_nonzero of them); null when none is.")
+#: How scores.json defines its MAPE.
+MAPE_NOTE = ("MAPE_pct = mean(|simulated - predicted| / |simulated|) x 100 over the runs "
+             "whose simulated value is nonzero (n_nonzero of them); null when none is.")
 
 
 def pearson_r(y_true, y_pred):
@@ -54,18 +55,19 @@ def regression_scores(y_true, y_pred):
     n_nonzero = nonzero.sum(axis=0)
     with np.errstate(invalid="ignore"):
         mape = 100.0 * np.where(nonzero, rel, 0.0).sum(axis=0) / n_nonzero
-    return {m: {"R": _num(r[j]), "R2": _num(r2[j]), "MAPE_pct": _num(mape[j]),
+    return {m: {"R": json_number(r[j]), "R2": json_number(r2[j]), "MAPE_pct": json_number(mape[j]),
                 "n_nonzero": int(n_nonzero[j])}
             for j, m in enumerate(METRICS)}
 
 
-def _num(x):
+def json_number(x):
     """A JSON-safe float: None for NaN or infinity."""
     x = float(x)
     return x if np.isfinite(x) else None
 
 
-def _score_text(x):
+def score_text(x):
+    """A score for a log line: ``0.987``, five characters wide; ``  n/a`` for None."""
     return "  n/a" if x is None else f"{x:5.3f}"
 
 
@@ -78,7 +80,7 @@ def format_scores(scores):
              f"(split seed {scores['split']['seed']})"]
     for m, (symbol, unit) in METRICS.items():
         lines.append(f"{symbol:>4} ({unit}): " + "  ".join(
-            f"{part} R {_score_text(scores[part][m]['R'])} "
-            f"R2 {_score_text(scores[part][m]['R2'])}"
+            f"{part} R {score_text(scores[part][m]['R'])} "
+            f"R2 {score_text(scores[part][m]['R2'])}"
             for part in ("train", "test", "cv")))
     return "\n".join(lines + scores["warnings"])

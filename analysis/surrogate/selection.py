@@ -46,10 +46,11 @@ import pandas as pd
 from joblib import Parallel, delayed
 from scipy.stats import norm
 
+from analysis.columns import METRICS, input_columns
 from analysis.io import atomic_path
-from analysis.metrics.dataset import METRICS, input_columns, point_groups
+from analysis.metrics.dataset import point_groups
 from analysis.surrogate.candidates import CANDIDATES, GPSurrogate, make_candidate, refit_warm
-from analysis.surrogate.data import _check_dataset, inputs_of, point_folds, targets_of
+from analysis.surrogate.data import check_dataset, inputs_of, point_folds, targets_of
 from analysis.surrogate.intervals import (
     calibrate,
     calibrated_from_predictions,
@@ -59,8 +60,8 @@ from analysis.surrogate.intervals import (
     relative_noise,
     with_products,
 )
-from analysis.surrogate.network import _convergence_messages
-from analysis.surrogate.scores import _num, regression_scores
+from analysis.surrogate.network import convergence_messages
+from analysis.surrogate.scores import json_number, regression_scores
 
 #: Candidates whose surfaces are smooth, in the order a tie prefers them (config order decides among them).
 SMOOTH = ("mlp", "gp")
@@ -73,7 +74,7 @@ def _fold(name, p, X, Y, train, test, start=None, keep=False):
     when ``keep`` else None).
     """
     t0 = time.perf_counter()
-    with _convergence_messages() as messages:
+    with convergence_messages() as messages:
         if start is None:
             model = make_candidate(name, p).fit(X[train], Y[train])
         else:
@@ -202,7 +203,7 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
         metric and its ``<metric>_std`` (the fold model's std of its mean).
     """
     p = params
-    _check_dataset(df)
+    check_dataset(df)
     X, Y = inputs_of(df), targets_of(df)
     confidence = check_confidence(p["confidence"])
     rho, _ = relative_noise(df, random_state=int(p["random_state"]))
@@ -484,7 +485,7 @@ def fit_chosen(df, params, name, train_idx=None):
     rows = np.arange(len(df)) if train_idx is None else np.asarray(train_idx, int)
     model = make_candidate(name, params)
     t0 = time.perf_counter()
-    with _convergence_messages() as messages:
+    with convergence_messages() as messages:
         model.fit(X[rows], Y[rows])
     info = {"name": name, "description": CANDIDATES[name], "n_train": int(len(rows)),
             "fit_time_s": round(time.perf_counter() - t0, 3),
@@ -547,8 +548,8 @@ def chosen_summary(model, info, df, split, table):
     X, Y = inputs_of(df), targets_of(df)
     train, test = (np.asarray(split[k], int) for k in ("train", "test"))
     mine = table[table["model"] == info["name"]]
-    cv = {scheme: {row.metric: {"R": _num(row.R), "R2": _num(row.R2),
-                                "MAPE_pct": _num(row.MAPE_pct)} for row in block.itertuples()}
+    cv = {scheme: {row.metric: {"R": json_number(row.R), "R2": json_number(row.R2),
+                                "MAPE_pct": json_number(row.MAPE_pct)} for row in block.itertuples()}
           for scheme, block in mine.groupby("scheme", sort=False)}
     _, ranking = choose_model(table)
     return {**info,
@@ -561,4 +562,4 @@ def chosen_summary(model, info, df, split, table):
             "train": regression_scores(Y[train], model.predict(X[train])),
             "test": regression_scores(Y[test], model.predict(X[test])),
             "cv": cv,
-            "ranking_mean_kfold_R2": {m: _num(v) for m, v in ranking.items()}}
+            "ranking_mean_kfold_R2": {m: json_number(v) for m, v in ranking.items()}}

@@ -7,8 +7,8 @@ with its spread over seeded splits, and the size of the dataset.
 """
 from __future__ import annotations
 
+from analysis.columns import METRICS, SHORT_NAMES, input_units
 from analysis.io import write_text
-from analysis.metrics.dataset import METRICS, SHORT_NAMES, input_units
 from analysis.surrogate.candidates import CANDIDATES
 from analysis.surrogate.predict import provides_intervals
 from analysis.surrogate.recommend import recommend
