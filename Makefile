@@ -29,7 +29,7 @@ test: setup
 	PYTHON=$(PYTHON) .ci/lint
 	$(PYTHON) -m pytest -n 2 --dist loadscope --no-loadscope-reorder -q --durations=15 tests
 
-# The SLURM path on a real one-node cluster (root; about 70 min on 2 cores): benchmarks/measured/slurm.md
+# The SLURM path on a real one-node cluster (root; its run time: benchmarks/README.md): benchmarks/measured/slurm.md
 bench-slurm: setup
 	@if ! dpkg -s $(SLURM_APT_PACKAGES) >/dev/null 2>&1; then \
 	    echo "Installing $(SLURM_APT_PACKAGES) from Debian's packages"; \

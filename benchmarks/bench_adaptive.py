@@ -23,7 +23,7 @@ after each round.
 Writes benchmarks/measured/<name>.csv, .md and .png (``--name``; default
 ``adaptive`` for the default level, ``adaptive_<level>`` otherwise) with the
 machine and the date.  Cost at the default level: held-out + Sobol + adaptive
-runs not yet simulated, ~80-140 s each on one core (README).
+runs not yet simulated, each a `default` spread (its cost: benchmarks/measured/make_map.md).
 """
 from __future__ import annotations
 

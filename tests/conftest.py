@@ -27,7 +27,7 @@ SMOKE_SEED_SD = _smoke_seed_sd()
 # follows the workflow's, since xdist queues two modules per worker at the start.
 # (pytest-xdist 3.8's `loadgroup` does not group under pytest 9.2: its `xdist_group` suffix is
 # written to `item._nodeid`, which pytest 9 no longer reads.)
-FIRST_MODULES = ("test_workflow.py", "test_liggghts.py", "test_trends.py", "test_supply_guard.py",
+FIRST_MODULES = ("test_workflow.py", "test_simulate.py", "test_trends.py", "test_supply_guard.py",
                  "test_calibration.py")
 
 

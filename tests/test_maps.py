@@ -1,4 +1,5 @@
-"""Figures 6-10: hybrid-index arithmetic, process-map lines, written files."""
+"""Figures 6-10: hybrid-index arithmetic, process-map lines, the written files, and the figures' content
+(axes' ranges, the runs plotted, colour bars) against the model's predictions computed here."""
 
 import runpy
 from pathlib import Path
@@ -60,7 +61,15 @@ def test_process_map_lines_meet_at_the_swept_runs(fitted):
     assert lines["throughput_index"].max() <= 1 + 1e-9
 
 
+#: Figure sizes (inches) of each kind at the maps' 150 dpi: the PNGs' pixel sizes.
+_SIZES = {"surface": (8.0, 6.5), "contour": (7.5, 6.2), "parity": (10.0, 4.8), "process_map": (9.0, 6.5),
+          "operating_window": (7.8, 6.6)}
+
+
 def _check_figures(paths, outdir, window=False):
+    """Every figure written once, in both formats, nothing else left; each PNG an image of its
+    figure's size at 150 dpi with something drawn (not one flat colour); each SVG a drawing."""
+    from matplotlib.image import imread
     expected = {f"{m}_{kind}.{ext}" for m in METRICS for kind in ("surface", "contour", "parity")
                 for ext in ("png", "svg")} | {"process_map.png", "process_map.svg"}
     if window:
@@ -68,11 +77,15 @@ def _check_figures(paths, outdir, window=False):
     assert {p.name for p in paths} == expected
     assert {p.name for p in Path(outdir).iterdir()} == expected        # no temporaries
     for path in paths:
-        data = path.read_bytes()
         if path.suffix == ".png":
-            assert data.startswith(PNG_MAGIC) and len(data) > 20_000, path.name
+            assert path.read_bytes().startswith(PNG_MAGIC), path.name
+            kind = next(k for k in _SIZES if path.stem.endswith(k))
+            image = imread(path)
+            assert image.shape[:2] == (round(150 * _SIZES[kind][1]), round(150 * _SIZES[kind][0])), path.name
+            rgb = (255 * image[::3, ::3, :3]).astype(np.uint32)
+            assert len(np.unique(rgb[..., 0] << 16 | rgb[..., 1] << 8 | rgb[..., 2])) > 50, path.name
         else:
-            assert b"<svg" in data[:2000] and len(data) > 20_000, path.name
+            assert b"<svg" in path.read_bytes()[:2000], path.name
 
 
 def test_render_maps_writes_every_figure(fitted, dataset, tmp_path):
@@ -80,9 +93,11 @@ def test_render_maps_writes_every_figure(fitted, dataset, tmp_path):
     split = (scores["split"]["train"], scores["split"]["test"])
     paths = render_maps(model, dataset, split, tmp_path / "maps", n=21)
     _check_figures(paths, tmp_path / "maps")
-    # Labels carry units.
+    # the parity plot's titles state R of the runs, recomputed here from the model's predictions
     svg = (tmp_path / "maps" / "throughput_mm2_s_parity.svg").read_text()
-    assert "Training: R = " in svg and "Test: R = " in svg
+    sim, pred = dataset["throughput_mm2_s"].to_numpy(), model.predict(inputs_of(dataset))[:, 1]
+    for name, rows in zip(("Training", "Test"), split):
+        assert f"{name}: R = {np.corrcoef(sim[rows], pred[rows])[0, 1]:.3f}" in svg
 
 
 def test_render_maps_script(fitted, dataset, tmp_path, fake_snakemake):
@@ -100,6 +115,101 @@ def test_render_maps_script(fitted, dataset, tmp_path, fake_snakemake):
     runpy.run_path(str(smk.scriptdir / "render_maps.py"), init_globals={"snakemake": smk})
     paths = sorted((tmp_path / "maps").iterdir())
     _check_figures(paths, tmp_path / "maps", window=True)
+
+
+# --- the figures' content, against the model's predictions computed here ------------------
+
+def _hand_grid(model, n, U=(40, 100), omega=(-20, 20)):
+    """The model's predictions on the n x n (U, omega) grid: {metric: (n, n) array}, U outer."""
+    UU, WW = np.meshgrid(np.linspace(*U, n), np.linspace(*omega, n), indexing="ij")
+    pred = model.predict(np.column_stack([UU.ravel(), WW.ravel()]))
+    return {m: pred[:, j].reshape(n, n) for j, m in enumerate(METRICS)}
+
+
+def _runs(ax, label):
+    """The points of the scatter whose legend label starts with ``label`` ((k, 2) offsets)."""
+    found = [c for c in ax.collections if c.get_label().startswith(label)]
+    assert len(found) == 1, [c.get_label() for c in ax.collections]
+    return np.asarray(found[0].get_offsets())
+
+
+def _colour_bar(fig):
+    bars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    assert len(bars) == 1
+    return bars[0].get_ylim()
+
+
+@pytest.mark.parametrize("metric", list(METRICS))
+def test_surface_and_contour_figures_show_the_model_and_the_runs(fitted, dataset, metric):
+    """Figures 6-9 (a) and the contour map: the speeds' ranges on the axes, 35 training and 10
+    test runs plotted where they were run, the colour bar spanning the model's predictions over
+    the grid (the surface: its faces', each coloured by its corners' mean; the contours: to within
+    one contour level)."""
+    from analysis.viz.maps import contour_figure, surface_figure
+    model, scores = fitted
+    split = (np.array(scores["split"]["train"]), np.array(scores["split"]["test"]))
+    Z = _hand_grid(model, 11)[metric]
+    runs = dataset[["omega_rad_s", "U_mm_s"]].to_numpy()
+
+    surface = surface_figure(model, dataset, split, metric, n=11)
+    ax = surface.axes[0]
+    assert -24 < ax.get_xlim()[0] <= -20 and 20 <= ax.get_xlim()[1] < 24      # omega across (3-D margins)
+    assert 34 < ax.get_ylim()[0] <= 40 and 100 <= ax.get_ylim()[1] < 106      # U along the depth
+    assert ax.get_zlim()[0] <= min(Z.min(), dataset[metric].min())
+    assert ax.get_zlim()[1] >= max(Z.max(), dataset[metric].max())
+    assert len(_runs(ax, "training runs")) == 35 and len(_runs(ax, "test runs")) == 10
+    faces = (Z[:-1, :-1] + Z[1:, :-1] + Z[:-1, 1:] + Z[1:, 1:]) / 4      # a face is coloured by its corners' mean
+    assert _colour_bar(surface) == pytest.approx((faces.min(), faces.max()), rel=1e-9)
+
+    contour = contour_figure(model, dataset, split, metric, n=11)
+    ax = contour.axes[0]
+    assert ax.get_xlim() == (-20, 20) and ax.get_ylim() == (40, 100)
+    assert np.array_equal(_runs(ax, "simulated training runs"), runs[split[0]])
+    assert np.array_equal(_runs(ax, "simulated test runs"), runs[split[1]])
+    levels = next(c for c in ax.collections if c.get_label() != "_nolegend_"
+                  and hasattr(c, "levels")).levels
+    assert _colour_bar(contour) == pytest.approx((levels[0], levels[-1]))
+    assert levels[0] <= Z.min() < levels[1] and levels[-2] < Z.max() <= levels[-1]
+
+
+def test_parity_figure_plots_each_run_at_its_simulated_and_predicted_values(fitted, dataset):
+    from analysis.viz.maps import parity_figure
+    model, scores = fitted
+    split = (np.array(scores["split"]["train"]), np.array(scores["split"]["test"]))
+    predicted = model.predict(inputs_of(dataset))
+    fig = parity_figure(dataset, predicted, split, "roughness_um")
+    sim, pred = dataset["roughness_um"].to_numpy(), predicted[:, 2]
+    lo, hi = min(sim.min(), pred.min()), max(sim.max(), pred.max())
+    assert len(fig.axes) == 2
+    for ax, rows, name in zip(fig.axes, split, ("Training", "Test")):
+        assert np.allclose(_runs(ax, f"{len(rows)} runs"), np.column_stack([sim[rows], pred[rows]]))
+        assert ax.get_title() == f"{name}: R = {np.corrcoef(sim[rows], pred[rows])[0, 1]:.3f}"
+        assert ax.get_xlim() == ax.get_ylim() == pytest.approx((lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)))
+
+
+def test_process_map_figure_draws_the_runs_and_lines_at_hand_computed_indices(fitted, dataset):
+    """Figure 10: the runs at their simulated metrics normalised by the model's maxima over the
+    101 x 101 grid, the iso-U line of 70 mm/s at the model's indices along omega, both axes from 0."""
+    from analysis.viz.maps import process_map_figure
+    model, scores = fitted
+    split = (np.array(scores["split"]["train"]), np.array(scores["split"]["test"]))
+    fig = process_map_figure(model, dataset, split, n=101)
+    ax = fig.axes[0]
+    top = {m: z.max() for m, z in _hand_grid(model, 101).items()}
+    t = dataset["throughput_mm2_s"] / top["throughput_mm2_s"] * dataset["mass_g"] / top["mass_g"]
+    d = dataset["roughness_um"] / top["roughness_um"] * dataset["porosity_pct"].clip(lower=0) / top["porosity_pct"]
+    runs = np.column_stack([t, d])
+    assert np.allclose(_runs(ax, "simulated runs (training)"), runs[split[0]])
+    assert np.allclose(_runs(ax, "simulated runs (test)"), runs[split[1]])
+    lines = [line.get_xydata() for line in ax.get_lines() if len(line.get_xydata()) > 2]
+    assert len(lines) == 5 + 9
+    omega = np.linspace(-20, 20, 101)
+    pred = model.predict(np.column_stack([np.full(101, 70.0), omega]))
+    iso_70 = np.column_stack([pred[:, 1] / top["throughput_mm2_s"] * pred[:, 0] / top["mass_g"],
+                              pred[:, 2] / top["roughness_um"] * np.clip(pred[:, 3], 0, None) / top["porosity_pct"]])
+    assert sum(np.allclose(line, iso_70) for line in lines) == 1
+    assert ax.get_xlim()[0] == 0 and ax.get_xlim()[1] >= max(runs[:, 0].max(), max(li[:, 0].max() for li in lines))
+    assert ax.get_ylim()[0] == 0 and ax.get_ylim()[1] >= max(runs[:, 1].max(), max(li[:, 1].max() for li in lines))
 
 
 def test_supply_limited_runs_are_ringed_on_the_surfaces_and_the_process_map(fitted, dataset):

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import sklearn
-from conftest import synthetic_dataset
+from conftest import synthetic_dataset, synthetic_metrics
 from sklearn.exceptions import ConvergenceWarning
 
 from analysis.columns import METRICS
@@ -49,18 +49,49 @@ def test_surrogate_reaches_the_papers_accuracy(fitted):
     assert scores["warnings"] == []
 
 
-def test_scores_structure_and_json(fitted, dataset):
-    _, scores = fitted
-    assert {"sklearn_version", "n_runs", "inputs", "metrics", "params", "deviation_from_paper",
-            "fit", "split", "input_range", "swept", "train", "test", "cv", "cv_settings",
-            "mape_note", "warnings"} <= scores.keys()
-    for part in ("train", "test", "cv"):
-        assert set(scores[part]) == set(METRICS)
-        for values in scores[part].values():
-            assert set(values) == {"R", "R2", "MAPE_pct", "n_nonzero"}
+def _hand_scores(y, p):
+    """Pearson R, R^2 and MAPE (%) of one metric, written out: the oracle of `regression_scores`."""
+    dy, dp = y - y.mean(), p - p.mean()
+    return {"R": np.sum(dy * dp) / np.sqrt(np.sum(dy**2) * np.sum(dp**2)),
+            "R2": 1 - np.sum((y - p) ** 2) / np.sum(dy**2),
+            "MAPE_pct": 100 * np.mean(np.abs(p - y) / np.abs(y))}
+
+
+def test_scores_values_recomputed_by_hand_and_json(fitted, dataset):
+    """scores.json's train and test scores are the fitted network's on its split's runs (R, R^2
+    and MAPE recomputed here from its predictions), on known fits R is 1 or -1 and R^2 what it
+    must be, and the split and input range are the dataset's."""
+    model, scores = fitted
+    train, test = split_runs(dataset, 10, 0)
     assert scores["split"]["seed"] == 0
-    assert scores["split"]["test"] == split_runs(dataset, 10, 0)[1].tolist()
-    assert scores["input_range"] == {"U_mm_s": [40.0, 100.0], "omega_rad_s": [-20.0, 20.0]}
+    assert scores["split"]["train"] == train.tolist() and scores["split"]["test"] == test.tolist()
+    X, Y = inputs_of(dataset), dataset[list(METRICS)].to_numpy(float)
+    for part, rows in (("train", train), ("test", test)):
+        pred = model.predict(X[rows])
+        for j, m in enumerate(METRICS):
+            hand = _hand_scores(Y[rows, j], pred[:, j])
+            got = scores[part][m]
+            assert got["n_nonzero"] == len(rows), (part, m)
+            for key, value in hand.items():
+                assert got[key] == pytest.approx(value, rel=1e-9), (part, m, key)
+    for m in METRICS:                                # the pooled out-of-fold predictions: no better than the fit
+        assert scores["cv"][m]["n_nonzero"] == 45
+        assert scores["cv"][m]["R2"] <= scores["train"][m]["R2"] + 1e-9
+    # known fits: perfect, scaled and shifted (R 1, R^2 by hand), reversed (R -1)
+    y = Y
+    perfect = regression_scores(y, y)
+    assert all(s["R"] == pytest.approx(1) and s["R2"] == pytest.approx(1) and s["MAPE_pct"] == 0
+               for s in perfect.values())
+    scaled = regression_scores(y, 1.1 * y)
+    for j, s in enumerate(scaled.values()):
+        d = y[:, j] - y[:, j].mean()
+        assert s["R"] == pytest.approx(1)
+        assert s["R2"] == pytest.approx(1 - np.sum((0.1 * y[:, j]) ** 2) / np.sum(d**2))
+        assert s["MAPE_pct"] == pytest.approx(10)
+    reversed_ = regression_scores(y, 2 * y.mean(axis=0) - y)
+    assert all(s["R"] == pytest.approx(-1) for s in reversed_.values())
+    assert scores["input_range"] == {"U_mm_s": [dataset["U_mm_s"].min(), dataset["U_mm_s"].max()],
+                                     "omega_rad_s": [dataset["omega_rad_s"].min(), dataset["omega_rad_s"].max()]}
     assert scores["cv_settings"]["folds"] == 5
     assert scores["params"]["n_init"] == 3
     json.dumps(scores, allow_nan=False)          # strictly valid JSON
@@ -144,15 +175,25 @@ def test_load_rejects_a_foreign_file(tmp_path):
 
 
 def test_predict_grid_covers_the_range_with_indices(fitted):
-    grid = predict_grid(fitted[0], (40, 100), (-20, 20), 5)
+    """The grid is the model's prediction at every (U, omega) of the linspace grid, and its hybrid
+    indices are Figure 10's products, computed here by hand from the grid's own predicted metrics
+    and, within the fit's error, from the synthetic truth at those speeds."""
+    model = fitted[0]
+    grid = predict_grid(model, (40, 100), (-20, 20), 5)
     assert len(grid) == 25
     assert list(grid.columns) == ["U_mm_s", "omega_rad_s", *METRICS,
                                   "throughput_index", "defect_index"]
-    assert sorted(grid["U_mm_s"].unique()) == [40, 55, 70, 85, 100]
-    assert sorted(grid["omega_rad_s"].unique()) == [-20, -10, 0, 10, 20]
-    t, d = hybrid_indices(grid)
-    assert np.allclose(grid["throughput_index"], t) and np.allclose(grid["defect_index"], d)
-    assert grid["throughput_index"].max() <= 1.0 and grid["defect_index"].max() <= 1.0
+    U, omega = (a.ravel() for a in np.meshgrid([40, 55, 70, 85, 100], [-20, -10, 0, 10, 20], indexing="ij"))
+    assert np.array_equal(grid["U_mm_s"], U) and np.array_equal(grid["omega_rad_s"], omega)
+    assert np.allclose(grid[list(METRICS)], model.predict(np.column_stack([U, omega])))
+    M, Q, Rq, Phi = (grid[m].to_numpy() for m in ("mass_g", "throughput_mm2_s", "roughness_um", "porosity_pct"))
+    assert np.allclose(grid["throughput_index"], Q / Q.max() * M / M.max())
+    assert np.allclose(grid["defect_index"], Rq / Rq.max() * np.maximum(Phi, 0) / Phi.max())
+    true = synthetic_metrics(U, omega)
+    assert np.allclose(grid["throughput_index"], true["throughput_mm2_s"] / true["throughput_mm2_s"].max()
+                       * true["mass_g"] / true["mass_g"].max(), atol=0.05)
+    assert np.allclose(grid["defect_index"], true["roughness_um"] / true["roughness_um"].max()
+                       * true["porosity_pct"] / true["porosity_pct"].max(), atol=0.05)
 
 
 def test_split_table_roundtrip(dataset, tmp_path):
