@@ -88,7 +88,7 @@ class WorkflowEvaluator:
     the same point are reused) and gathers the requested points' runs with
     :func:`analysis.metrics.dataset.build_dataset` (the workflow's own
     ``results/<level>/dataset.csv`` is left alone).  The run folders are the
-    round config's own (:func:`analysis.config.runs_at` over the base config
+    round config's own (:func:`analysis.config.sweep.runs_at` over the base config
     merged with the round's, as Snakemake merges them), so they follow the
     workflow's naming.  The extra axes are the base config's
     (:func:`analysis.config.sweep_axes`); points are (b, k): U (mm/s),
@@ -122,14 +122,14 @@ class WorkflowEvaluator:
 
     def resolved(self, round_cfg):
         """The config Snakemake runs the round with: the base updated by ``round_cfg``
-        (Snakemake's ``update_config``), loaded and checked (:func:`analysis.config.load_config`)."""
+        (Snakemake's ``update_config``), loaded and checked (:func:`analysis.config.load.load_config`)."""
         from snakemake.utils import update_config
         merged = copy.deepcopy(self.base)
         update_config(merged, round_cfg)
         return load_config(merged, base_dir=ROOT)
 
     def run_table(self, points, config):
-        """The runs (:class:`analysis.config.Run`) of the points (b, k), every replicate, in ``config``."""
+        """The runs (:class:`analysis.config.sweep.Run`) of the points (b, k), every replicate, in ``config``."""
         names = [*SPEED_AXES, *self.axes]
         return runs_at(config, [dict(zip(names, p)) for p in np.atleast_2d(points).tolist()])
 

@@ -67,7 +67,7 @@ def build_dataset(metrics_files, health_files, benchmark_files, out, level: str 
     TSVs (same order) into ``out`` (CSV, written atomically), each run checked
     by :func:`check_run`.
 
-    ``points`` (one ``{input: value}`` per run, :attr:`analysis.config.Run.point`) gives each run's
+    ``points`` (one ``{input: value}`` per run, :attr:`analysis.config.sweep.Run.point`) gives each run's
     inputs, first in its row: the run table, not the run's own file, says where a run sits in the
     sweep (a run at the config's own value of an axis was written before the axis was swept).
 

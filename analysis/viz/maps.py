@@ -45,7 +45,7 @@ def map_views(points, axes=tuple(INPUTS), hold=None, panels=None):
     -------
     list of (dict, list of (MapView, numpy.ndarray))
         Per map set: the slice's values (``{input: value}``, its folder,
-        :func:`analysis.config.variant_path`) and per panel its view and the positions of the
+        :func:`analysis.config.sweep.variant_path`) and per panel its view and the positions of the
         points drawn in it (those at the view's held values).
     """
     inputs, hold = tuple(input_columns(points)), dict(hold or {})
