@@ -119,7 +119,7 @@ def main():
         "|---:|---:|---|---:|---:|",
         *rows,
     ])
-    text = f"""# Benchmark: spread-layer metrics (`analysis/metrics/spread_layer.py`, on `analysis/metrics/profilometer.py`)
+    text = f"""# Benchmark: spread-layer metrics (`analysis/metrics/spread_layer.py`)
 
 Machine: {machine()}. One process, threads as the environment left them.
 Measured by `.venv/bin/python benchmarks/bench_layer_metrics.py`: the whole
