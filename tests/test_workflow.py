@@ -69,6 +69,25 @@ def test_the_workflow_ends_on_one_line_of_what_the_spreads_cost(workflow):
     assert np.all(data.particle_steps >= present * travel_steps * (1 - 1e-3))
 
 
+def test_map_record_benchmark_reads_the_finished_map(workflow, tmp_path):
+    """benchmarks/map_record.py (the record of `make map`) on the smoke map: its figures are the dataset's
+    and the scores' (the benchmark's cheap smoke test, so that it cannot rot unseen)."""
+    from benchmarks import map_record
+    out = tmp_path / "map_smoke.md"
+    assert map_record.main(["--results", str(workflow / "results"), "--level", "smoke", "--out", str(out)]) == 0
+    text = out.read_text()
+    data = pd.read_csv(workflow / "results/smoke/dataset.csv")
+    scores = json.loads((workflow / "results/smoke/surrogate/scores.json").read_text())
+    assert f"; {len(data)} spreads" in text
+    assert f"LIGGGHTS' CPU: {data.cpu_s.sum():.0f} s in all" in text
+    assert f"smallest `supply_margin` {data.supply_margin.min():.2f}" in text
+    assert f"| M_s | {scores['test']['mass_g']['R']:.3f} |" in text
+    assert f"Chosen model: **{scores['model']['name']}**" in text
+    spread_jobs = int(re.search(r"^\| spread \| (\d+) \|", text, re.MULTILINE).group(1))
+    assert spread_jobs >= len(data)  # the sweep's spreads (and any run outside it asked for by path)
+    assert "## The paper's trends (section 3)" in text and "| agrees" in text
+
+
 def test_dataset_has_one_sane_row_per_run(workflow):
     data = pd.read_csv(workflow / "results/smoke/dataset.csv")
     assert len(data) == len(FIRST_U) * len(OMEGAS)
