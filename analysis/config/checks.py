@@ -198,7 +198,7 @@ def check_speeds(config: dict) -> None:
         steps = (s.travel_end - s.box[0]) / (slowest["U_mm_s"] * 1e-3) / s.timestep
         if steps > MAX_RUN_STEPS:
             refuse("sweep.U_mm_s", slowest["U_mm_s"], f"needs {steps:.3g} time steps of {s.timestep:.3g} s to travel "
-                  f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm (from behind the heap, fidelity.{s.level}.heap_start_mm, "
+                  f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm (from behind the heap, a roller.diameter_mm behind fidelity.{s.level}.heap_start_mm, "
                   f"heap_length_mm and heap_particles, to the end of fidelity.{s.level}.sampling_start_mm + "
                   f"sampling_length_mm + run_out_mm; the step is timestep.rayleigh_fraction of the Rayleigh time of "
                   f"material.youngs_modulus_dem_Pa): at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
