@@ -177,6 +177,8 @@ def main(argv=None):
     saved = scratch / "out.json"
     out = json.loads(saved.read_text()) if saved.exists() else {}
     out.setdefault("stopped", {})
+    out.setdefault("commit", subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                                            text=True).stdout.strip() or "unknown")
     out["limit_setup"] = {"run": limited_run, "checkpoints": args.limit_checkpoints, "retries": args.limit_retries}
     out["args"] = f" --limit-point {args.limit_point} --limit-checkpoints {args.limit_checkpoints} " \
                   f"--limit-retries {args.limit_retries}"
@@ -308,8 +310,9 @@ def write(out, checks, table, tolerance):
     lines = [
         "# The SLURM path on a real one-node cluster",
         "",
-        f"Measured {machine()} by `.venv/bin/python benchmarks/bench_slurm.py{out.get('args', '')}`, "
-        "on 2 cores shared with other work (times are inflated and noisy).",
+        f"Measured at commit {out.get('commit', 'unknown')}, {machine()} by `.venv/bin/python "
+        f"benchmarks/bench_slurm.py{out.get('args', '')}`, on 2 cores shared with other work (times are inflated "
+        "and noisy).",
         "",
         f"- Debian 12 packages: slurm-wlm {v['slurm-wlm']}, munge {v['munge']}, PMIx (libpmix2) {v['libpmix2']}, "
         f"Open MPI (openmpi-bin) {v['openmpi-bin']}, MariaDB {v['mariadb-server']}, LIGGGHTS {v['liggghts']}; "
