@@ -155,7 +155,7 @@ def test_roller_polygon_keeps_the_mean_gap_over_a_turn_and_at_rest(facets):
 def test_gap_is_set_from_the_sampling_regions_mean_plane(config):
     """Over a tilted bed (z = a + b x) the region's mean plane is not the field's: the roller's
     axis stands gap + R above the mean height under the sampling region, a + b x_mid."""
-    from analysis.dem.simulate import roller_gap
+    from analysis.dem.geometry import roller_gap
     s = scene(config, "smoke")
     a, b = 20e-6, 4e-3
     x = np.linspace(s.box[0], s.box[1], 401)

@@ -198,10 +198,11 @@ def check_speeds(config: dict) -> None:
         steps = (s.travel_end - s.box[0]) / (slowest["U_mm_s"] * 1e-3) / s.timestep
         if steps > MAX_RUN_STEPS:
             refuse("sweep.U_mm_s", slowest["U_mm_s"], f"needs {steps:.3g} time steps of {s.timestep:.3g} s to travel "
-                  f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm (from behind the heap, a roller.diameter_mm behind fidelity.{s.level}.heap_start_mm, "
-                  f"heap_length_mm and heap_particles, to the end of fidelity.{s.level}.sampling_start_mm + "
-                  f"sampling_length_mm + run_out_mm; the step is timestep.rayleigh_fraction of the Rayleigh time of "
-                  f"material.youngs_modulus_dem_Pa): at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
+                  f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm (from behind the heap, a roller.diameter_mm behind "
+                  f"fidelity.{s.level}.heap_start_mm, heap_length_mm and heap_particles, to the end of "
+                  f"fidelity.{s.level}.sampling_start_mm + sampling_length_mm + run_out_mm; the step is "
+                  f"timestep.rayleigh_fraction of the Rayleigh time of material.youngs_modulus_dem_Pa): "
+                  f"at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
         r_min = min(s.diameters) / 2
         for p in points:
             wall = (p["U_mm_s"] * 1e-3 + abs(p["omega_rad_s"]) * s.roller_radius) * s.timestep

@@ -1,4 +1,5 @@
-"""Scene geometry: the rough substrate and the roller, as STL meshes in metres.
+"""Scene geometry: the rough substrate and the roller, as STL meshes in metres, and where the
+roller stands over the substrate (its gap as built, its start behind the heap).
 
 Axes: x along the roller's travel, y along the roller's axis (the periodic
 strip), z up; the substrate's mean plane is z = 0.
@@ -6,13 +7,17 @@ strip), z up; the substrate's mean plane is z = 0.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import meshio
 import numpy as np
 import trimesh
 
 from analysis.io import write_bytes
-from analysis.physics import polygon_circumradius
+from analysis.physics import polygon_bottom_range, polygon_circumradius
+
+if TYPE_CHECKING:
+    from analysis.config.fidelity import Scene
 
 
 def gaussian_random_field(nx: int, ny: int, spacing: float, correlation_length: float,
@@ -208,3 +213,39 @@ def _finite(mesh: trimesh.Trimesh, path) -> trimesh.Trimesh:
         raise ValueError(f"the surface mesh {str(path)!r} has {bad.sum()} vertices that are not finite numbers "
                          f"(e.g. {used[bad][0].tolist()})")
     return mesh
+
+
+def roller_gap(s: Scene, substrate, roller) -> dict:
+    """Where the roller's axis goes so that its gap is the one set, and the gap as built.
+
+    The gap is measured from the substrate's mean plane under the sampling region (not the
+    whole field's), to the roller's bottom averaged over a turn (:func:`roller`:
+    the polygon's mean bottom is ``R`` below its axis, and a still roller stands at that
+    mean). Returns the axis height ``axis_z_m`` [m], the datum ``substrate_mean_region_m``,
+    the polygon's ``circumradius_m``, and in um the ``effective_gap_um`` (mean over a turn,
+    measured on the mesh as built) with its swing ``gap_min_um`` .. ``gap_max_um``.
+    """
+    datum = substrate_rms(substrate, s.sampling_region[:2])[0]
+    axis_z = datum + s.roller_gap + s.roller_radius
+    mesh = roller
+    near, far = polygon_bottom_range(s.roller_radius, s.roller_facets)
+    turns = np.linspace(0.0, 2 * np.pi, 3600, endpoint=False)
+    xz = mesh.vertices[:, [0, 2]]
+    depth = np.max(-(np.sin(turns)[:, None] * xz[:, 0] + np.cos(turns)[:, None] * xz[:, 1]), axis=1)
+    return {"axis_z_m": axis_z, "substrate_mean_region_m": datum, "circumradius_m": far,
+            "effective_gap_um": (axis_z - depth.mean() - datum) * 1e6,
+            "gap_still_um": (axis_z - roller_bottom_depth(mesh) - datum) * 1e6,
+            "gap_min_um": (axis_z - far - datum) * 1e6, "gap_max_um": (axis_z - near - datum) * 1e6}
+
+
+def roller_start(atoms, s: Scene, clearance: float | None = None, axis_z: float | None = None) -> float:
+    """x [m] of the roller axis just behind the settled heap (no particle touched).
+
+    For each particle, the axis at height ``axis_z`` (default ``gap + R``) must stay
+    ``R + r + clearance`` away; the start is the smallest such x over all particles.
+    """
+    clearance = 0.2 * min(s.diameters) if clearance is None else clearance
+    zc = s.roller_gap + s.roller_radius if axis_z is None else axis_z
+    reach = s.roller_radius + atoms["radius"].to_numpy() + clearance
+    dz = np.minimum(np.abs(atoms["z"].to_numpy() - zc), reach)
+    return float(np.min(atoms["x"].to_numpy() - np.sqrt(reach**2 - dz**2)))

@@ -61,7 +61,7 @@ from analysis.dem.inputs import (
 from analysis.dem.liggghts import LiggghtsError, input_path, render, run
 from analysis.io import USER_ERRORS, error_line, write_json
 from analysis.metrics.dump import read_dump
-from analysis.physics import liggghts_seeds, polygon_bottom_range, roller_motion
+from analysis.physics import liggghts_seeds, roller_motion
 
 #: Length [m] over which the rough substrate ramps to flat outside the sampling region.
 ROUGH_TAPER = 0.5e-3
@@ -211,42 +211,6 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
     return summary
 
 
-def roller_gap(s: Scene, substrate, roller) -> dict:
-    """Where the roller's axis goes so that its gap is the one set, and the gap as built.
-
-    The gap is measured from the substrate's mean plane under the sampling region (not the
-    whole field's), to the roller's bottom averaged over a turn (:func:`geometry.roller`:
-    the polygon's mean bottom is ``R`` below its axis, and a still roller stands at that
-    mean). Returns the axis height ``axis_z_m`` [m], the datum ``substrate_mean_region_m``,
-    the polygon's ``circumradius_m``, and in um the ``effective_gap_um`` (mean over a turn,
-    measured on the mesh as built) with its swing ``gap_min_um`` .. ``gap_max_um``.
-    """
-    datum = geometry.substrate_rms(substrate, s.sampling_region[:2])[0]
-    axis_z = datum + s.roller_gap + s.roller_radius
-    mesh = roller
-    near, far = polygon_bottom_range(s.roller_radius, s.roller_facets)
-    turns = np.linspace(0.0, 2 * np.pi, 3600, endpoint=False)
-    xz = mesh.vertices[:, [0, 2]]
-    depth = np.max(-(np.sin(turns)[:, None] * xz[:, 0] + np.cos(turns)[:, None] * xz[:, 1]), axis=1)
-    return {"axis_z_m": axis_z, "substrate_mean_region_m": datum, "circumradius_m": far,
-            "effective_gap_um": (axis_z - depth.mean() - datum) * 1e6,
-            "gap_still_um": (axis_z - geometry.roller_bottom_depth(mesh) - datum) * 1e6,
-            "gap_min_um": (axis_z - far - datum) * 1e6, "gap_max_um": (axis_z - near - datum) * 1e6}
-
-
-def roller_start(atoms, s: Scene, clearance: float | None = None, axis_z: float | None = None) -> float:
-    """x [m] of the roller axis just behind the settled heap (no particle touched).
-
-    For each particle, the axis at height ``axis_z`` (default ``gap + R``) must stay
-    ``R + r + clearance`` away; the start is the smallest such x over all particles.
-    """
-    clearance = 0.2 * min(s.diameters) if clearance is None else clearance
-    zc = s.roller_gap + s.roller_radius if axis_z is None else axis_z
-    reach = s.roller_radius + atoms["radius"].to_numpy() + clearance
-    dz = np.minimum(np.abs(atoms["z"].to_numpy() - zc), reach)
-    return float(np.min(atoms["x"].to_numpy() - np.sqrt(reach**2 - dz**2)))
-
-
 CHECKPOINT_DIR = "checkpoint"
 
 
@@ -289,7 +253,7 @@ class SpreadPlan:
     speed: float            # U [m/s]
     x0: float               # the roller axis' start [m]
     travel_steps: int
-    gap: dict               # :func:`roller_gap`: the axis height and the gap as built
+    gap: dict               # :func:`geometry.roller_gap`: the axis height and the gap as built
     settled_particles: int  # particles of the settled heap
     first_fed_id: int       # the id of the first particle the feed adds
     feeds: list             # travel steps of the feed's top-ups (empty: no feed)
@@ -339,13 +303,13 @@ def plan_spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, mes
     speed = U_mm_s * 1e-3
     substrate = geometry.load_stl(meshes / "substrate.stl")
     peak = float(substrate.vertices[:, 2].max())
-    gap = roller_gap(s, substrate, geometry.load_stl(meshes / "roller_shell.stl"))
+    gap = geometry.roller_gap(s, substrate, geometry.load_stl(meshes / "roller_shell.stl"))
     # a swept gap spreads over the substrate made under roller.gap_um
     if peak >= gap["axis_z_m"] - gap["circumradius_m"]:
         raise ConfigError(f"config key 'roller.gap_um' = {s.roller_gap * 1e6:g}: the substrate's highest peak "
                           f"({peak * 1e6:.0f} um) reaches the roller")
     atoms0 = read_dump(settled / "settled.dump").atoms
-    x0 = roller_start(atoms0, s, axis_z=gap["axis_z_m"])
+    x0 = geometry.roller_start(atoms0, s, axis_z=gap["axis_z_m"])
     if x0 - s.roller_radius <= s.box[0]:
         raise LiggghtsError(f"roller start x = {x0:.4g} m puts the roller outside the box (x >= {s.box[0]:.4g} m)")
     travel_time = (s.travel_end - x0) / speed
