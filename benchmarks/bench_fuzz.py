@@ -20,18 +20,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
-from benchmarks.machine import machine  # noqa: E402
+from benchmarks.machine import commit, machine  # noqa: E402
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--examples", type=int, default=5000, help="cases per test (default 5000)")
     args = parser.parse_args(argv)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                            text=True).stdout.strip() or "unknown"
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT, capture_output=True,
-                           text=True).stdout.strip()
-    commit += " with uncommitted changes" if dirty else ""
     start = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/test_fuzz.py",
                            "--hypothesis-show-statistics"], cwd=ROOT, capture_output=True, text=True,
@@ -50,7 +45,7 @@ def main(argv=None):
     text = "\n".join([
         "# Fuzzing the config check (values, YAML text), the dump reader (plain, gzip) and layer_metrics",
         "",
-        f"Measured at commit {commit}, {machine()}, in {elapsed:.0f} s, by `.venv/bin/python "
+        f"Measured at commit {commit()}, {machine()}, in {elapsed:.0f} s, by `.venv/bin/python "
         f"benchmarks/bench_fuzz.py --examples {args.examples}` (tests/test_fuzz.py, seeded: the same cases "
         "every run).",
         "",

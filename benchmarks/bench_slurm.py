@@ -54,7 +54,7 @@ sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkou
 from analysis.columns import METRICS  # noqa: E402
 from analysis.metrics.noise_floor import pooled_seed_sd, two_run_tolerance  # noqa: E402
 from benchmarks.faults import compare_runs, half_written_files  # noqa: E402
-from benchmarks.machine import machine  # noqa: E402
+from benchmarks.machine import commit, machine  # noqa: E402
 from benchmarks.slurm_cluster import OneNodeCluster, job_table, missing_commands, snakemake_job_events  # noqa: E402
 
 RANKS = {"smoke": {"mpi_ranks": 2}}
@@ -177,8 +177,7 @@ def main(argv=None):
     saved = scratch / "out.json"
     out = json.loads(saved.read_text()) if saved.exists() else {}
     out.setdefault("stopped", {})
-    out.setdefault("commit", subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                                            text=True).stdout.strip() or "unknown")
+    out.setdefault("commit", commit())
     out["limit_setup"] = {"run": limited_run, "checkpoints": args.limit_checkpoints, "retries": args.limit_retries}
     out["args"] = f" --limit-point {args.limit_point} --limit-checkpoints {args.limit_checkpoints} " \
                   f"--limit-retries {args.limit_retries}"

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import datetime
 import platform
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,20 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or "unknown CPU"
+
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def commit() -> str:
+    """This checkout's short commit hash, with " with uncommitted changes" if tracked files differ from it."""
+    def git(*args):
+        try:
+            return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+        except OSError:
+            return ""
+    head = git("rev-parse", "--short", "HEAD") or "unknown"
+    return head + (" with uncommitted changes" if git("status", "--porcelain", "--untracked-files=no") else "")
 
 
 def machine() -> str:

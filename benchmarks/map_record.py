@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 from pathlib import Path
 
@@ -25,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
 
 from analysis.columns import METRICS  # noqa: E402
-from benchmarks.machine import machine  # noqa: E402
+from benchmarks.machine import commit, machine  # noqa: E402
 
 
 def job_times(bench_dir: Path) -> pd.DataFrame:
@@ -85,14 +84,6 @@ def section(path: Path, title: str, drop_title: bool = True) -> str:
     if drop_title and text.startswith("# "):
         text = text.split("\n", 1)[1].strip()
     return f"## {title}\n\n{text}\n"
-
-
-def commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                              text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def record(results: Path, level: str, wall_min: float | None = None, command: str = "make map",
