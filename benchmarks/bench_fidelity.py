@@ -69,7 +69,15 @@ VARIANTS = {
     "strip1.8": {"LEVEL.strip_width_mm": 1.8, "LEVEL.heap_particles": 1350},
     "heap1.5x": {"LEVEL.heap_particles": 1350},
     "lines2000": {"LEVEL.profilometer_lines": 2000},
+    # the stiffness ladder of the fed scene (docs/scene_size.md: Stiffness)
+    "E5e7": {"material.youngs_modulus_dem_Pa": 5.0e7},
+    "E1e8": {"material.youngs_modulus_dem_Pa": 1.0e8},
 }
+
+#: Health figures of a spread recorded beside its metrics (analysis.dem.health).
+HEALTH = ("heap_exhausted", "max_overlap_fraction", "max_overlap_anywhere", "peak_speed_m_s",
+          "inrun_max_overlap_fraction", "inrun_max_wall_overlap_fraction", "squeeze_outs_max",
+          "fed_max_ahead_of_front_mm", "fed_share_of_region_layer")
 
 
 def variant_config(base: dict, level: str, overrides: dict) -> dict:
@@ -111,7 +119,7 @@ def run_scene(task) -> list[dict]:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        make_geometry(config, level, tmp / "meshes")
+        make_geometry(config, level, tmp / "meshes", replicate=replicate)  # a new substrate and heap
         try:
             settle(config, level, tmp / "meshes", tmp / "settle", replicate=replicate)
         except LiggghtsError as err:  # a broken setting is a result too
@@ -121,7 +129,8 @@ def run_scene(task) -> list[dict]:
         for U, omega in points:
             cpu0 = children_cpu()
             try:
-                health = spread(config, level, U, omega, tmp / "meshes", tmp / "settle", tmp / "run")
+                health = spread(config, level, U, omega, tmp / "meshes", tmp / "settle", tmp / "run",
+                                replicate=replicate)
             except (LiggghtsError, ValueError) as err:  # ValueError: e.g. an empty layer to measure
                 print(f"{name} seed {replicate} U={U:g} omega={omega:g}: failed: {err}", flush=True)
                 rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
@@ -131,10 +140,7 @@ def run_scene(task) -> list[dict]:
             rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
                          "wall_s": health["wall_s"], "cpu_s": cpu, "steps": health["steps"],
                          "particles": health["atoms"], "timestep_s": health["timestep_s"],
-                         "heap_exhausted": health["heap_exhausted"],
-                         "max_overlap_fraction": health["max_overlap_fraction"],
-                         "max_overlap_anywhere": health["max_overlap_anywhere"],
-                         "peak_speed_m_s": health["peak_speed_m_s"],
+                         **{k: health.get(k) for k in HEALTH},
                          "sampling_area_mm2": sampling_area_mm2(config, level),
                          **measure_layer(config, level, tmp / "run", tmp / "meshes", U)})
             print(f"{name} seed {replicate} U={U:g} omega={omega:g}: {health['wall_s']:.1f} s, "
@@ -224,9 +230,12 @@ def main(argv=None) -> int:
                 {n: sampling_area_mm2(config, level) for n, config, level, *_ in tasks})
             runs.to_csv(out / f"{args.name}.csv", index=False)
     else:
+        done = []
         with ProcessPoolExecutor(args.jobs) as pool:
-            runs = pd.DataFrame([row for rows in pool.map(run_scene, tasks) for row in rows])
-        runs.to_csv(out / f"{args.name}.csv", index=False)
+            for rows in pool.map(run_scene, tasks):  # saved as each scene ends: a long study is not lost
+                done += rows
+                pd.DataFrame(done).to_csv(out / f"{args.name}.csv", index=False)
+        runs = pd.DataFrame(done)
     table = summarise(runs, args.reference)
     plot(table, out / f"{args.name}.png")
     overrides = "\n".join(f"- `{n}`: {VARIANTS[n] or 'the level as configured'}" for n in names)

@@ -134,3 +134,30 @@ def test_workflow_summary_counts_every_integrated_particle_step():
     line = workflow_summary(table, wall_s=600.0)
     assert line == ("spreadmap: 2 runs, LIGGGHTS CPU 6.7 min (200 s a run), 1.50 M particle-steps per CPU second, "
                     "workflow wall time 10.0 min")
+
+
+def test_a_fed_particle_is_judged_against_the_front_where_the_pile_is_when_it_lands(tmp_path):
+    """feed_landings: the pile's front at a landing is the top-up's front carried on by the roller,
+    or the next top-up's measured front where the pile slumped further forward; a particle of the
+    last top-up is judged against the carried front (no later measurement)."""
+    from analysis.dem.health import feed_landings
+    from analysis.metrics.dump import write_dump
+
+    box = np.array([[-0.01, 0.03], [0, 1e-3], [0, 5e-3]])
+    for step, x in ((100, [1.9e-3, 1.2e-3]), (200, [2.7e-3])):
+        atoms = pd.DataFrame({"id": [step + i for i in range(len(x))], "x": x, "y": 5e-4, "z": 4e-4,
+                              "radius": 1e-4})
+        write_dump(tmp_path / f"landed.{step}.dump", atoms, box, timestep=step)
+    roller_x = lambda step: 5e-6 * step  # noqa: E731  the roller's axis: 0.5 mm per 100 steps
+    printed = {"feed_front_100": 1.0e-3, "feed_front_200": 2.0e-3}  # the pile slumped 0.5 mm past its carry
+    landed = feed_landings(tmp_path, printed, roller_x, {100: 200, 200: 300}).set_index("id")
+    # top-up 100: landed at step 200, front then max(1.0 + 0.5 carried, 2.0 measured) = 2.0 mm
+    assert landed.loc[[100, 101], "front_at_landing_m"].tolist() == pytest.approx([2.0e-3, 2.0e-3])
+    assert landed.loc[[100, 101], "ahead_of_front_m"].tolist() == pytest.approx([-0.1e-3, -0.8e-3])
+    # top-up 200: landed at the travel's end (step 300), carried front 2.0 + 0.5 = 2.5 mm
+    assert landed.loc[200, "ahead_of_front_m"] == pytest.approx(0.2e-3)
+    assert landed.loc[200, "ahead_of_roller_m"] == pytest.approx(2.7e-3 - 1.5e-3)
+    # a pile that receded is judged where the roller carried it, not nearer
+    receded = feed_landings(tmp_path, {"feed_front_100": 1.0e-3, "feed_front_200": 1.2e-3}, roller_x,
+                            {100: 200, 200: 300}).set_index("id")
+    assert receded.loc[100, "ahead_of_front_m"] == pytest.approx(1.9e-3 - 1.5e-3)

@@ -193,10 +193,13 @@ def feed_landings(folder: Path, printed: dict, roller_x, landed_at: dict) -> pd.
 
     ``roller_x(step)`` is the roller axis' x [m] at a step. Columns: ``id``, ``topup_step``,
     ``x_landed_m``, ``radius_m``, ``front_m`` (the pile's front measured at the top-up),
-    ``ahead_of_front_m`` (landed x less that front carried on by the roller's travel since)
-    and ``ahead_of_roller_m`` (landed x less the roller axis' x when it was written down). A run
-    resumed from a checkpoint has the dumps its killed attempt wrote, but their fronts (NaN) only
-    where its own log printed them."""
+    ``front_at_landing_m`` (the pile's front when the landing was written down: ``front_m``
+    carried on by the roller's travel since, or the next top-up's measured front where the pile
+    has slumped further forward than that), ``ahead_of_front_m`` (landed x less
+    ``front_at_landing_m``: powder on a pile that slumps forward goes with it, a sphere rolled
+    onto bare bed lies ahead of it) and ``ahead_of_roller_m`` (landed x less the
+    roller axis' x when it was written down). A run resumed from a checkpoint has the dumps its
+    killed attempt wrote, but their fronts (NaN) only where its own log printed them."""
     rows = []
     for path in sorted(Path(folder).glob("landed.*.dump"), key=lambda p: int(p.name.split(".")[1])):
         step = int(path.name.split(".")[1])
@@ -204,12 +207,15 @@ def feed_landings(folder: Path, printed: dict, roller_x, landed_at: dict) -> pd.
         end = landed_at[step]
         # a top-up before a resumed attempt printed its front in the killed attempt's log
         front = printed.get(f"feed_front_{step}", np.nan)
+        carried = front + roller_x(end) - roller_x(step)
+        front_then = np.fmax(printed.get(f"feed_front_{end}", carried), carried)
         rows.append(pd.DataFrame({
             "id": atoms["id"].to_numpy(), "topup_step": step, "x_landed_m": atoms["x"].to_numpy(),
-            "radius_m": atoms["radius"].to_numpy(), "front_m": front,
-            "ahead_of_front_m": atoms["x"].to_numpy() - (front + roller_x(end) - roller_x(step)),
+            "radius_m": atoms["radius"].to_numpy(), "front_m": front, "front_at_landing_m": front_then,
+            "ahead_of_front_m": atoms["x"].to_numpy() - front_then,
             "ahead_of_roller_m": atoms["x"].to_numpy() - roller_x(end)}))
-    columns = ["id", "topup_step", "x_landed_m", "radius_m", "front_m", "ahead_of_front_m", "ahead_of_roller_m"]
+    columns = ["id", "topup_step", "x_landed_m", "radius_m", "front_m", "front_at_landing_m", "ahead_of_front_m",
+               "ahead_of_roller_m"]
     return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=columns)
 
 
