@@ -4,6 +4,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_fidelity.py [--level default] [--points 100:-10,100:0,100:10]
         [--seeds 2] [--variants reference,default,E1e6,...] [--jobs 2] [--name fidelity]
+        [--ladder default,E2e7,E5e7,E1e8] [--out benchmarks/measured]
 
 Every variant is the config's fidelity level with a few keys overridden
 (``VARIANTS`` below). For each variant and seed (replicate: another heap
@@ -178,6 +179,35 @@ def summarise(runs: pd.DataFrame, reference: str) -> pd.DataFrame:
     return table
 
 
+def convergence(runs: pd.DataFrame, ladder: list[str]) -> pd.DataFrame:
+    """Each step of a ladder of variants (cheapest first, each the next one made finer, stiffer or
+    bigger) judged in the finer scene's own seed spread.
+
+    For each step ``a -> b`` and metric: the largest over the points of |mean_a - mean_b| divided
+    by the pooled seed sd of ``b`` (the root of the mean over the points of ``b``'s seed variance),
+    and the signed mean relative change ``100 (a - b) / b`` [%]. The step is converged in a metric when
+    that largest shift is at most 1 (one pooled sd of the finer scene: a noisy coarse scene does not
+    pass more easily). M_s per unit sampling area, as ``summarise``. Failed runs are left out.
+    """
+    if "error" in runs:
+        runs = runs[runs["error"].isna()]
+    if "sampling_area_mm2" in runs:
+        runs = runs.assign(mass_g=runs["mass_g"] / runs["sampling_area_mm2"])
+    groups = runs.groupby(["variant", "U_mm_s", "omega_rad_s"])[list(METRICS)]
+    means, sds = groups.mean(), groups.std()
+    rows = []
+    for a, b in zip(ladder, ladder[1:]):
+        shift = (means.loc[a] - means.loc[b]).dropna()
+        pooled = (sds.loc[b] ** 2).mean() ** 0.5
+        in_sd = shift.abs().max() / pooled
+        rel = (shift / means.loc[b].loc[shift.index]).mean()
+        rows.append({"step": f"{a} -> {b}", "points": len(shift),
+                     **{f"{METRICS[k]} shift (sd of {b})": in_sd[k] for k in METRICS},
+                     **{f"{METRICS[k]} change (%)": 100 * rel[k] for k in METRICS},
+                     "converged": bool((in_sd <= 1).all())})
+    return pd.DataFrame(rows)
+
+
 def plot(table: pd.DataFrame, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -209,6 +239,10 @@ def main(argv=None) -> int:
     parser.add_argument("--reference", default="reference")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--name", default="fidelity")
+    parser.add_argument("--ladder", default="",
+                        help="variants from cheapest to finest (e.g. default,E2e7,E5e7,E1e8): each step judged in "
+                             "the finer one's pooled seed sd (convergence)")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured", help="folder of the results")
     parser.add_argument("--summarise", action="store_true",
                         help="no runs: rewrite <name>.md and .png from <name>.csv (same --variants, --reference)")
     args = parser.parse_args(argv)
@@ -222,7 +256,11 @@ def main(argv=None) -> int:
     tasks = [(n, variant_config(base, args.level, VARIANTS[n]), args.level, seed, points)
              for n in names for seed in range(args.seeds)]
     started = time.perf_counter()
-    out = ROOT / "benchmarks" / "measured"
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    ladder = [n for n in args.ladder.split(",") if n]
+    if set(ladder) - set(names):
+        parser.error(f"--ladder {args.ladder!r} names variants not among --variants {args.variants!r}")
     if args.summarise:
         runs = pd.read_csv(out / f"{args.name}.csv")
         if "sampling_area_mm2" not in runs:  # recorded before the column existed: from the variants' configs
@@ -255,6 +293,11 @@ def main(argv=None) -> int:
             f"Error: mean over the points of |variant - reference| / mean |reference|, each the mean "
             f"over its seeds; M_s per unit sampling area (a wider strip has a wider region).\n\n"
             f"Variants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")
+    if len(ladder) > 1:
+        steps = convergence(runs, ladder)
+        text += ("\n## Convergence, one step at a time\n\nEach step's largest shift over the points, in "
+                 "pooled seed sds of the finer scene, and its mean relative change; converged: every "
+                 "metric within 1 sd.\n\n" + steps.to_markdown(index=False, floatfmt=".2f") + "\n")
     (out / f"{args.name}.md").write_text(text)
     print(text)
     return 0

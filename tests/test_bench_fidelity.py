@@ -1,0 +1,61 @@
+"""benchmarks/bench_fidelity.py: the convergence judgement on hand-made runs, and a smoke run of
+the benchmark itself through real LIGGGHTS (the study: benchmarks/measured/stiffness.md)."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from benchmarks import bench_fidelity
+from benchmarks.bench_fidelity import METRICS, convergence
+
+
+def runs_of(variant, means, sds, points=((70, -15), (70, 0))):
+    """Three seeds per point whose sample mean and sd are ``means``/``sds`` (per metric)."""
+    rows = []
+    for U, omega in points:
+        for z in (-1.0, 0.0, 1.0):  # sample sd of (-1, 0, 1) is 1
+            rows.append({"variant": variant, "seed": int(z + 1), "U_mm_s": U, "omega_rad_s": omega,
+                         **{k: means[k] + z * sds[k] for k in METRICS}})
+    return rows
+
+
+def test_a_step_is_judged_in_the_finer_scenes_sd_not_the_coarser_ones():
+    base = {"mass_g": 1.0, "throughput_mm2_s": 20.0, "roughness_um": 80.0, "porosity_pct": 40.0}
+    tight = {k: 0.02 * v for k, v in base.items()}          # the finer scene: 2 % seed sd
+    noisy = {k: 0.20 * v for k, v in base.items()}          # the coarse one: 20 %
+    shifted = {**base, "roughness_um": 80.0 * 1.05}          # R_q 5 % off: 2.5 finer sds, 0.25 coarse
+    runs = pd.DataFrame(runs_of("soft", shifted, noisy) + runs_of("stiff", base, tight))
+    (step,) = convergence(runs, ["soft", "stiff"]).to_dict("records")
+    assert step["step"] == "soft -> stiff" and step["points"] == 2
+    assert step["R_q shift (sd of stiff)"] == pytest.approx(2.5)
+    assert step["R_q change (%)"] == pytest.approx(5.0)
+    assert step["M_s shift (sd of stiff)"] == pytest.approx(0.0, abs=1e-9)
+    assert not step["converged"]
+    # the same shift judged in the noisy scene's sd would pass: the order matters
+    (back,) = convergence(runs, ["stiff", "soft"]).to_dict("records")
+    assert back["R_q shift (sd of soft)"] == pytest.approx(4.0 / 16.0) and back["converged"]
+
+
+def test_mass_is_compared_per_unit_sampling_area_and_failed_runs_are_left_out():
+    base = {"mass_g": 1.0, "throughput_mm2_s": 20.0, "roughness_um": 80.0, "porosity_pct": 40.0}
+    sds = {k: 0.05 * v for k, v in base.items()}
+    wide = pd.DataFrame(runs_of("wide", {**base, "mass_g": 2.0}, {**sds, "mass_g": 0.1})).assign(
+        sampling_area_mm2=10.0)
+    narrow = pd.DataFrame(runs_of("narrow", base, sds)).assign(sampling_area_mm2=5.0)
+    broken = pd.DataFrame([{"variant": "narrow", "U_mm_s": 70, "omega_rad_s": -15, "error": "ERROR: lost atoms"}])
+    (step,) = convergence(pd.concat([narrow, broken, wide]), ["narrow", "wide"]).to_dict("records")
+    assert step["M_s shift (sd of wide)"] == pytest.approx(0.0, abs=1e-9) and step["converged"]
+
+
+def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_writes_its_tables(tmp_path):
+    """One smoke spread per variant and the ladder's table: the benchmark's own path, cheaply."""
+    assert bench_fidelity.main(["--level", "smoke", "--points", "100:0", "--seeds", "1", "--jobs", "1",
+                                "--variants", "default", "--reference", "default", "--name", "smoke",
+                                "--out", str(tmp_path)]) == 0
+    runs = pd.read_csv(tmp_path / "smoke.csv")
+    assert len(runs) == 1 and ("error" not in runs or runs["error"].isna().all())
+    row = runs.iloc[0]
+    assert row["cpu_s"] > 0 and row["steps"] > 1000 and not row["heap_exhausted"]
+    assert 0 < row["mass_g"] and 0 < row["roughness_um"] < 300
+    assert np.isfinite(row["inrun_max_overlap_fraction"]) and row["squeeze_outs_max"] >= 0
+    table = (tmp_path / "smoke.md").read_text()
+    assert "| default " in table and "0.0%" in table  # the reference against itself
