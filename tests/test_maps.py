@@ -289,13 +289,13 @@ def test_operating_window_marks_the_recommended_setting(calibrated_gp):
     split = (np.arange(35), np.arange(35, 45))
     meta = {"input_range": {"U_mm_s": [40.0, 100.0], "omega_rad_s": [-20.0, 20.0]}}
     found = recommend(model, meta, 8, 60, n=121)
-    fig = window_figure(model, df, split, 8, 60, n=121)
+    fig = window_figure(model, df, split, {"max_porosity_pct": 8, "max_roughness_um": 60}, n=121)
     best = fig.recommended[0]
     assert (best["U_mm_s"], best["omega_rad_s"]) == pytest.approx((found["U_mm_s"], found["omega_rad_s"]))
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert any(label.startswith("recommended: U = ") for label in labels)
     assert "90 % of runs" in fig.axes[0].get_title()
-    none = window_figure(model, df, split, None, 1.0, n=21)      # R_q <= 1 um: nowhere
+    none = window_figure(model, df, split, {"max_roughness_um": 1.0}, n=21)      # R_q <= 1 um: nowhere
     assert none.recommended == [None]
     assert any("no setting meets the limits" in t.get_text() for t in none.axes[0].texts)
 

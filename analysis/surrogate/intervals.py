@@ -375,8 +375,6 @@ class SurrogateStack:
     ``predict`` gives the parts' columns side by side, in ``metrics`` order.
     """
 
-    provides_std = True
-
     def __init__(self, parts, part_metrics=None):
         self.parts = list(parts)
         self.part_metrics = [tuple(m) for m in (part_metrics or [metrics_of(p) for p in self.parts])]
@@ -385,15 +383,20 @@ class SurrogateStack:
             raise ValueError(f"stacked surrogates must predict disjoint metrics, got {names}")
 
     @property
+    def provides_std(self):
+        """True when every part gives a predictive standard deviation."""
+        return all(getattr(p, "provides_std", False) for p in self.parts)
+
+    @property
     def metrics(self):
         """Every part's metrics, in the parts' order."""
         return tuple(m for ms in self.part_metrics for m in ms)
 
     def predict(self, X, return_std=False):
         """The parts' predictions side by side, (n, k) [metric units]; with ``return_std`` also their std."""
-        out = [p.predict(X, return_std=return_std) for p in self.parts]
         if not return_std:
-            return np.column_stack(out)
+            return np.column_stack([p.predict(X) for p in self.parts])
+        out = [p.predict(X, return_std=True) for p in self.parts]
         return np.column_stack([m for m, _ in out]), np.column_stack([s for _, s in out])
 
 

@@ -98,8 +98,9 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
     axes, hold, panels
         As :func:`map_views` (config ``maps``).
     window : dict, optional
-        ``max_porosity_pct`` and ``max_roughness_um`` (None: no limit) of the operating window
-        (config ``maps.operating_window``); None: no window map.
+        The operating window's limits (config ``maps.operating_window``: ``max_porosity_pct``,
+        ``max_roughness_um``, ``max_void_fraction_pct``, ``min_coverage_pct``; None: no limit;
+        :data:`analysis.surrogate.recommend.LIMITS`); None: no window map.
     lines_model : estimator, optional
         Draws the process map instead of ``model`` (a smooth model's iso-lines when the chosen
         one is piecewise flat), ``lines_note`` saying so in its caption.
@@ -137,7 +138,6 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
             paths += save_figure(process_map_figure(lines_model or model, None, None, max(n, 101), panels=drawn,
                                                     note=lines_note), where, "process_map")
             if window is not None:
-                paths += save_figure(window_figure(model, None, None, window.get("max_porosity_pct"),
-                                                   window.get("max_roughness_um"), panels=drawn),
-                                     where, "operating_window")
+                paths += save_figure(window_figure(model, None, None, window, panels=drawn), where,
+                                     "operating_window")
     return paths
