@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import synthetic_dataset
+from conftest import layer_structure, structured_dataset, synthetic_dataset
 
 from analysis.columns import METRICS, STRUCTURE_METRICS
 from analysis.metrics.dataset import (
@@ -37,20 +37,6 @@ from analysis.surrogate.selection import cross_validate_models, write_model_choi
 from analysis.surrogate.structure import fit_structure, format_structure, stack_structure
 
 STRUCTURE = list(STRUCTURE_METRICS)
-
-
-def layer_structure(U, omega):
-    """Known packing fraction and coverage (dimensionless) of the speeds: packing falls with U and
-    with omega, coverage falls from ~1 at omega < 0 to ~0.5 at omega = 20 rad/s."""
-    U, omega = np.asarray(U, float), np.asarray(omega, float)
-    return {"packing_fraction": 0.70 - 0.001 * U - 0.003 * omega,
-            "coverage": 1.0 - 0.5 / (1.0 + np.exp(-(omega - 5.0) / 4.0))}
-
-
-def structured_dataset(seed=0, noise=0.01):
-    """The synthetic 45-run dataset with dataset.csv's packing_fraction and coverage columns."""
-    df = synthetic_dataset(seed, noise=noise)
-    return df.assign(**layer_structure(df["U_mm_s"], df["omega_rad_s"]))
 
 
 class Constant:
