@@ -30,6 +30,7 @@ from analysis.surrogate.intervals import (
     conformal_quantile,
     metrics_of,
     relative_noise,
+    share_scale,
     with_products,
 )
 from analysis.surrogate.persistence import load_surrogate
@@ -54,8 +55,8 @@ class Constant:
 # --- the metrics, from dataset.csv's columns ------------------------------------------------------
 
 def test_void_fraction_and_coverage_from_the_datasets_fractions():
-    # the default map's run at U 70 mm/s, omega -15 rad/s: packing 0.637 is 36.3 % void (its Phi: 31 %)
-    assert void_fraction_pct(0.637) == pytest.approx(36.3)
+    # the default map's run at U 40 mm/s, omega -15 rad/s: packing 0.6345 is 36.55 % void (its Phi: 4.0 %)
+    assert void_fraction_pct(0.6345) == pytest.approx(36.55)
     assert void_fraction_pct([1.0, 0.0, np.nan])[:2].tolist() == [0.0, 100.0]
     assert np.isnan(void_fraction_pct([np.nan])[0])
     assert coverage_pct([0.9948, 0.4]) == pytest.approx([99.48, 40.0])
@@ -103,6 +104,21 @@ def test_products_and_noise_of_metrics_without_products():
     # sqrt(sum of squared relative deviations / (4 runs - 2 points))
     assert rho == pytest.approx([np.sqrt(2 * (2 / 38) ** 2 / 2), np.sqrt(2 * (1 / 98) ** 2 / 2)])
     assert "replicates" in source
+
+
+def test_a_shares_noise_is_binomial_and_never_zero():
+    assert share_scale([50.0, 80.0, 99.9, 100.0, -3.0]) == pytest.approx(
+        [50.0, 40.0, np.sqrt(95 * 5), np.sqrt(95 * 5), np.sqrt(5 * 95)])          # clipped to 5..95 %
+    # coverage replicates 99 / 97 around 98 (scale sqrt(95 x 5), clipped) and 50 / 50; void 40 / 36 and 30 / 30
+    df = pd.DataFrame({"U_mm_s": [70.0, 70.0, 40.0, 40.0], "omega_rad_s": [0.0] * 4,
+                       "void_fraction_pct": [40.0, 36.0, 30.0, 30.0], "coverage_pct": [99.0, 97.0, 50.0, 50.0]})
+    rho, _ = relative_noise(df, metrics=STRUCTURE, products={}, shares=["coverage_pct"])
+    assert rho == pytest.approx([np.sqrt(2 * (2 / 38) ** 2 / 2), np.sqrt(2 * (1 / np.sqrt(475)) ** 2 / 2)])
+    model = CalibratedSurrogate(Constant([30.0, 99.0], [0.0, 0.0]), [1.0, 1.0], [0.1, 0.1],
+                                np.ones((20, 2)), 20, 0.5, metrics=STRUCTURE, shares=["coverage_pct"])
+    _, run, _ = model.half_widths(np.zeros((1, 2)))
+    assert run[0] == pytest.approx([0.1 * 30.0, 0.1 * np.sqrt(95 * 5)])    # q = 1: rho x value, rho x share scale
+    assert model.summary()["binomial_noise"].keys() == {"coverage_pct"}
 
 
 def test_a_structure_surrogate_calibrates_its_own_two_quantities():

@@ -12,7 +12,10 @@ so a held-out run's point was never seen by the model that predicts it):
 1. **Scale.**  The predictive scale of a single run is
    ``sigma(x) = sqrt((c s(x))^2 + (rho mu(x))^2)``: the model's std, inflated by a
    factor ``c``, and the run-to-run noise, ``rho`` times the predicted metric
-   (the noise floor is relative: :mod:`analysis.metrics.noise_floor`).  ``rho``
+   (the noise floor is relative: :mod:`analysis.metrics.noise_floor`).  A share in %
+   whose runs pile up near 100 % (the coverage of the substrate) takes the noise of a
+   binomial share instead, ``rho sqrt(C (100 - C))`` with C clipped to 5..95 %
+   (:func:`share_scale`; ``shares=`` of the functions here).  ``rho``
    is the pooled relative seed-to-seed sd when the dataset has replicates, else
    the Gaussian process's white-noise term over the mean metric
    (:func:`relative_noise`); ``c`` makes the mean squared cross-validated
@@ -63,6 +66,9 @@ QUANTITIES = (*METRICS, "throughput_product", "defect_product")
 PRODUCTS = {"throughput_product": ("throughput_mm2_s", "mass_g"),
             "defect_product": ("roughness_um", "porosity_pct")}
 
+#: Where a share's binomial noise scale is clipped (%): a saturated share keeps some noise.
+SHARE_CLIP_PCT = (5.0, 95.0)
+
 METHOD = ("grouped cross-conformal (split conformal on the k-fold cross-validated residuals, "
           "folds by (U, omega) point), scores normalised by sqrt((c std)^2 + (rho mean)^2)")
 
@@ -109,7 +115,23 @@ def with_products(mean, std=None, metrics=METRICS, products=PRODUCTS):
                                         for a, b in pairs)])
 
 
-def relative_noise(df, n_restarts=0, random_state=0, metrics=METRICS, products=PRODUCTS):
+def share_scale(values):
+    """What a share's run-to-run noise is proportional to: ``sqrt(C (100 - C))`` [%], C [%] clipped to
+    :data:`SHARE_CLIP_PCT` (a binomial share's sd, up to a constant; never zero)."""
+    share = np.clip(np.asarray(values, float), *SHARE_CLIP_PCT)
+    return np.sqrt(share * (100.0 - share))
+
+
+def noise_scale(mean, shares=None):
+    """What each column's run-to-run noise is proportional to: the value itself, or
+    :func:`share_scale` of it for the columns ``shares`` marks (a boolean per column; None: none)."""
+    mean = np.asarray(mean, float)
+    if shares is None or not np.any(shares):
+        return mean
+    return np.where(np.asarray(shares, bool), share_scale(mean), mean)
+
+
+def relative_noise(df, n_restarts=0, random_state=0, metrics=METRICS, products=PRODUCTS, shares=()):
     """Run-to-run noise of each quantity relative to its value, shape (k + len(products),) (dimensionless).
 
     With replicates (>= 2 runs at some point): the pooled relative seed-to-seed sd,
@@ -117,7 +139,8 @@ def relative_noise(df, n_restarts=0, random_state=0, metrics=METRICS, products=P
     With one run per point: the white-noise std of a :class:`GPSurrogate` fitted to
     all runs, over the mean |metric|.  The products: ``hypot`` of their factors'
     (independent noise, first order).  ``metrics`` and ``products``: as :func:`with_products`'s
-    (default the four metrics and the hybrid indices' two products).
+    (default the four metrics and the hybrid indices' two products).  ``shares``: the metrics
+    (in %) whose noise is taken relative to :func:`share_scale` of their value instead.
 
     Returns
     -------
@@ -126,18 +149,20 @@ def relative_noise(df, n_restarts=0, random_state=0, metrics=METRICS, products=P
         Which of the two estimates it is.
     """
     Y = df[list(metrics)].to_numpy(float)
+    share = np.isin(list(metrics), list(shares))
     groups = point_groups(df)
     counts = np.bincount(groups)
     if (counts >= 2).any():
-        means = np.stack([np.bincount(groups, Y[:, j]) / counts for j in range(Y.shape[1])], axis=1)
-        rel = Y / means[groups] - 1.0
+        means = np.stack([np.bincount(groups, Y[:, j]) / counts for j in range(Y.shape[1])], axis=1)[groups]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = np.where(share, (Y - means) / share_scale(means), Y / means - 1.0)
         dof = len(Y) - len(counts)
         rho = np.sqrt((rel ** 2).sum(axis=0) / dof)
         source = f"pooled seed-to-seed sd of {len(Y)} runs at {len(counts)} points (replicates)"
     else:
         gp = GPSurrogate(n_restarts=n_restarts, random_state=random_state).fit(df[input_columns(df)]
                                                                                 .to_numpy(float), Y)
-        rho = gp.noise_std_ / np.abs(Y).mean(axis=0)
+        rho = gp.noise_std_ / np.where(share, share_scale(Y).mean(axis=0), np.abs(Y).mean(axis=0))
         source = "Gaussian process white-noise term (one run per point)"
     col = {m: j for j, m in enumerate(metrics)}
     rho = np.r_[rho, [np.hypot(rho[col[a]], rho[col[b]]) for a, b in products.values()]]
@@ -173,12 +198,13 @@ def conformal_quantile(scores, confidence, n_runs=None):
     return np.quantile(scores, rank / (n + 1), axis=0, method="higher")
 
 
-def _scale(mean, std, c, rho):
-    """Single-run predictive scale sqrt((c s)^2 + (rho mu)^2), never below 1e-12 |mu|."""
-    return np.maximum(np.hypot(c * std, rho * mean), 1e-12 * np.abs(mean) + 1e-300)
+def _scale(mean, std, c, rho, shares=None):
+    """Single-run predictive scale sqrt((c s)^2 + (rho mu)^2) (mu: :func:`noise_scale`'s), never below
+    1e-12 |mu|."""
+    return np.maximum(np.hypot(c * std, rho * noise_scale(mean, shares)), 1e-12 * np.abs(mean) + 1e-300)
 
 
-def calibrate(y, mean, std, rho):
+def calibrate(y, mean, std, rho, shares=None):
     """Inflation factor c of the model's std and the conformal scores of held-out runs.
 
     Parameters
@@ -188,6 +214,8 @@ def calibrate(y, mean, std, rho):
         the predicting model's std of its mean.
     rho : array_like, shape (6,)
         Relative run-to-run noise (:func:`relative_noise`).
+    shares : array_like of bool, optional
+        The columns whose noise scales with :func:`share_scale` of the prediction, not with it.
 
     Returns
     -------
@@ -199,10 +227,10 @@ def calibrate(y, mean, std, rho):
     """
     y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
     rho = np.asarray(rho, float)
-    excess = np.mean((y - mean) ** 2, axis=0) - np.mean((rho * mean) ** 2, axis=0)
+    excess = np.mean((y - mean) ** 2, axis=0) - np.mean((rho * noise_scale(mean, shares)) ** 2, axis=0)
     spread = np.mean(std ** 2, axis=0)
     c = np.sqrt(np.where(spread > 0, np.clip(excess, 0, None) / np.where(spread > 0, spread, 1), 0.0))
-    return c, np.abs(y - mean) / _scale(mean, std, c, rho)
+    return c, np.abs(y - mean) / _scale(mean, std, c, rho, shares)
 
 
 def interval_score(y, lower, upper, confidence):
@@ -294,6 +322,9 @@ class CalibratedSurrogate(_Coverage):
     products : dict, optional
         Products calibrated as further quantities, ``{name: (factor, factor)}`` (default
         :data:`PRODUCTS` with the default metrics, else none).
+    shares : sequence of str, optional
+        Metrics (in %) whose run-to-run noise scales with :func:`share_scale` of their value
+        (default none).
 
     ``predict(X)`` is the model's; ``predict(X, return_std=True)`` gives the
     calibrated std of the mean, ``c s(x)``; :meth:`predict_interval` the intervals.
@@ -303,9 +334,10 @@ class CalibratedSurrogate(_Coverage):
     method = METHOD
     metrics = tuple(METRICS)        # class defaults: a model saved before these attributes has them
     products = PRODUCTS
+    shares = ()
 
     def __init__(self, model, c, rho, scores, n_runs, confidence=0.9, noise_source="", metrics=None,
-                 products=None):
+                 products=None, shares=None):
         self.model = model
         self.c = np.asarray(c, float)
         self.rho = np.asarray(rho, float)
@@ -317,6 +349,8 @@ class CalibratedSurrogate(_Coverage):
             self.metrics = tuple(metrics)
         if products is not None or self.metrics != tuple(METRICS):
             self.products = dict(products or {})
+        if shares:
+            self.shares = tuple(shares)
 
     @property
     def name(self):
@@ -350,13 +384,17 @@ class CalibratedSurrogate(_Coverage):
         mean, std = with_products(*self.model.predict(np.asarray(X, float), return_std=True),
                                   self.metrics, self.products)
         q = self.multiplier(confidence)
-        return mean, q * _scale(mean, std, self.c, self.rho), q * self.c * std
+        shares = np.isin(self.quantities, self.shares)
+        return mean, q * _scale(mean, std, self.c, self.rho, shares), q * self.c * std
 
     def summary(self):
         """JSON-ready: method, noise source, rho, c and the multiplier at the default confidence."""
         q = self.multiplier()
         return {"method": self.method, "confidence": self.confidence, "n_calibration_runs": self.n_runs,
                 "noise_source": self.noise_source,
+                **({"binomial_noise": {m: "sd proportional to sqrt(C (100 - C)), C clipped to "
+                                          f"{SHARE_CLIP_PCT[0]:g}..{SHARE_CLIP_PCT[1]:g} %" for m in self.shares}}
+                   if self.shares else {}),
                 **{k: {name: float(v) for name, v in zip(self.quantities, values)}
                    for k, values in (("relative_noise", self.rho), ("std_inflation", self.c),
                                      ("multiplier", q))}}
@@ -465,7 +503,7 @@ class CalibratedStack(SurrogateStack, _Coverage):
 
 
 def calibrated_from_predictions(model, predictions, df, rho, confidence, noise_source="", metrics=METRICS,
-                                products=PRODUCTS):
+                                products=PRODUCTS, shares=()):
     """Wrap ``model`` with the calibration from its cross-validated predictions.
 
     Parameters
@@ -482,15 +520,18 @@ def calibrated_from_predictions(model, predictions, df, rho, confidence, noise_s
     metrics, products
         The model's metrics (column order) and the products calibrated beside them
         (:func:`with_products`; default the paper's four and the hybrid indices' two).
+    shares : sequence of str
+        Metrics whose noise scales with :func:`share_scale` (``rho`` estimated so,
+        :func:`relative_noise`'s ``shares``).
     """
     rows = predictions["row"].to_numpy(int)
     metrics = list(metrics)
     y = with_products(df[metrics].to_numpy(float)[rows], None, metrics, products)
     mean, std = with_products(predictions[metrics].to_numpy(float),
                               predictions[[f"{m}_std" for m in metrics]].to_numpy(float), metrics, products)
-    c, scores = calibrate(y, mean, std, rho)
+    c, scores = calibrate(y, mean, std, rho, np.isin([*metrics, *products], list(shares)))
     return CalibratedSurrogate(model, c, rho, scores, len(np.unique(rows)), confidence, noise_source,
-                               metrics, products)
+                               metrics, products, shares)
 
 
 def unbounded_warning(grid, n_runs, confidence):
