@@ -1,5 +1,6 @@
-"""The dataset's column vocabulary: the four layer metrics, the inputs and their units, how text
-names them. The ground floor: it imports nothing of the package, every layer may use it."""
+"""The dataset's column vocabulary: the four layer metrics, the layer-structure metrics mapped
+beside them, the inputs and their units, how text names them. The ground floor: it imports nothing
+of the package, every layer may use it."""
 from __future__ import annotations
 
 # The four layer metrics of the paper (eqs. 1-7): dataset column -> (symbol, unit)
@@ -9,6 +10,21 @@ METRICS = {
     "roughness_um": ("R_q", "um"),
     "porosity_pct": ("Phi", "%"),
 }
+
+#: Layer-structure metrics mapped beside the paper's four (not part of its method, nor of the model
+#: choice's score): dataset column -> (symbol, unit). Eq. 7's Phi takes 4 R_q as the layer's
+#: thickness; these do not. ``void_fraction_pct``: 100 (1 - packing fraction), the void share of the
+#: volume under the measured layer top (``packing_fraction``: the particles' solid volume over
+#: L_x L_y thk_avg); ``coverage_pct``: 100 x the share of profilometer probes that hit powder
+#: (``coverage``). Both derived from dataset.csv's columns by
+#: :func:`analysis.metrics.dataset.with_structure_metrics`.
+STRUCTURE_METRICS = {
+    "void_fraction_pct": ("eps", "%"),
+    "coverage_pct": ("C", "%"),
+}
+
+#: Every mapped metric: the paper's four, then the layer-structure ones.
+ALL_METRICS = {**METRICS, **STRUCTURE_METRICS}
 
 #: Input columns and their units: the spreader's speeds, in every dataset. A sweep's extra
 #: axes (config keys, ``sweep.<dotted key>``) are inputs too: columns named by their dotted

@@ -1,6 +1,7 @@
 """Snakemake entry: the paper's network (Table 2) scores, then the model chosen by
 cross-validation fitted on the same training points, its intervals calibrated on its
-held-out predictions; write model, scores, split, grid."""
+held-out predictions, and the same candidate fitted to the layer-structure metrics (void
+fraction, coverage) stacked beside it; write model, scores, split, grid."""
 
 import sys
 
@@ -15,6 +16,7 @@ from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import predict_grid
 from analysis.surrogate.scores import format_scores
 from analysis.surrogate.selection import chosen_summary, fit_calibrated, read_choice
+from analysis.surrogate.structure import format_structure, stack_structure
 
 with rule_context(snakemake):
     out, params = snakemake.output, snakemake.params.surrogate
@@ -32,6 +34,8 @@ with rule_context(snakemake):
     print(f"chosen by cross-validation: {name} ({info['description']}); test R "
           + " / ".join(f"{s['R']:.3f}" if s["R"] is not None else "n/a"
                        for s in scores["model"]["test"].values()))
+    model, scores["structure"] = stack_structure(model, df, params, name, scores["split"], n_jobs=snakemake.threads)
+    print(format_structure(scores["structure"]))
     save_surrogate(model, out.model, scores)
     write_json(scores, out.scores)
     with atomic_path(out.split) as tmp:

@@ -80,6 +80,20 @@ def synthetic_dataset(seed=0, noise=0.0, metrics=synthetic_metrics):
     return df
 
 
+def layer_structure(U, omega):
+    """Known packing fraction and coverage (dimensionless) of the speeds (mm/s, rad/s): packing falls
+    with U and with omega, coverage falls from ~1 at omega < 0 to ~0.5 at omega = 20 rad/s."""
+    U, omega = np.asarray(U, float), np.asarray(omega, float)
+    return {"packing_fraction": 0.70 - 0.001 * U - 0.003 * omega,
+            "coverage": 1.0 - 0.5 / (1.0 + np.exp(-(omega - 5.0) / 4.0))}
+
+
+def structured_dataset(seed=0, noise=0.01):
+    """The synthetic 45-run dataset with dataset.csv's packing_fraction and coverage (:func:`layer_structure`)."""
+    df = synthetic_dataset(seed, noise=noise)
+    return df.assign(**layer_structure(df["U_mm_s"], df["omega_rad_s"]))
+
+
 @pytest.fixture(scope="session")
 def dataset():
     """The noise-free synthetic 45-run dataset."""

@@ -68,6 +68,8 @@ def test_shipped_config_is_valid_and_has_the_papers_design(base):
     ("surrogate.confidence", 0, "surrogate.confidence"),
     ("fidelity.default.feed_pile_mg_per_mm", 500, "feed_pile_mg_per_mm"),   # does not fit ahead of the roller
     ("fidelity.default.feed_pile_mg_per_mm", -3, "feed_pile_mg_per_mm"),
+    ("maps.operating_window.min_coverage_pct", 150, "maps.operating_window.min_coverage_pct"),
+    ("maps.operating_window.max_void_fraction_pct", -2, "maps.operating_window.max_void_fraction_pct"),
 ])
 def test_bad_value_names_key_and_value(base, dotted, value, words):
     with pytest.raises(ConfigError) as err:

@@ -39,6 +39,21 @@ def test_front_page_states_the_window_the_choice_and_the_spread():
     assert "over 20 seeded splits" in text and "M_s 0.950 +- 0.020 (0.900 to 0.980)" in text
     none = front_page_rst(_scores(), _choice(), WINDOW, None, "the predicted mean")
     assert "No setting in the swept range meets them" in none
+    assert "Layer structure" not in text                      # scores.json without 'structure': not stated
+
+
+def test_front_page_states_the_structure_limits_and_scores():
+    structure = {"model": "mlp", "test": {"void_fraction_pct": {"R": 0.9412}, "coverage_pct": {"R": 0.987}},
+                 "cv": {"kfold": {"void_fraction_pct": {"R2": 0.8512}, "coverage_pct": {"R2": 0.9}}}}
+    window = {**WINDOW, "max_void_fraction_pct": 35, "min_coverage_pct": 95.0}
+    found = {**FOUND, "void_fraction_pct": 34.23, "coverage_pct": 98.76}
+    text = front_page_rst({**_scores(), "structure": structure}, _choice(), window, found, "the upper end")
+    assert "porosity <= 60 % and roughness R_q <= 90 um and void fraction <= 35 % and coverage >= 95 %" in text
+    assert "Phi 55 %, void fraction 34.2 %, coverage 98.8 %;" in text
+    assert ("void fraction eps = 100 (1 - packing fraction): test R 0.941, k-fold R^2 0.851; coverage C: "
+            "test R 0.987, k-fold R^2 0.900") in text
+    skipped = front_page_rst({**_scores(), "structure": {"skipped": "the dataset lacks coverage"}}, _choice())
+    assert "not fitted, the dataset lacks coverage" in skipped
 
 
 @pytest.mark.parametrize("level", ["smoke", "default"])

@@ -7,12 +7,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import synthetic_dataset, synthetic_metrics
+from conftest import structured_dataset, synthetic_dataset, synthetic_metrics
 
-from analysis.columns import METRICS
+from analysis.columns import METRICS, STRUCTURE_METRICS
+from analysis.metrics.dataset import with_structure_metrics
 from analysis.surrogate.candidates import GPSurrogate
-from analysis.surrogate.data import inputs_of, split_table, targets_of
-from analysis.surrogate.intervals import CalibratedSurrogate
+from analysis.surrogate.data import inputs_of, split_runs, split_table, targets_of
+from analysis.surrogate.intervals import CalibratedStack, CalibratedSurrogate
 from analysis.surrogate.persistence import save_surrogate
 from analysis.surrogate.predict import hybrid_indices, metric_maxima, predict_grid
 from analysis.viz.maps import render_maps
@@ -289,13 +290,13 @@ def test_operating_window_marks_the_recommended_setting(calibrated_gp):
     split = (np.arange(35), np.arange(35, 45))
     meta = {"input_range": {"U_mm_s": [40.0, 100.0], "omega_rad_s": [-20.0, 20.0]}}
     found = recommend(model, meta, 8, 60, n=121)
-    fig = window_figure(model, df, split, 8, 60, n=121)
+    fig = window_figure(model, df, split, {"max_porosity_pct": 8, "max_roughness_um": 60}, n=121)
     best = fig.recommended[0]
     assert (best["U_mm_s"], best["omega_rad_s"]) == pytest.approx((found["U_mm_s"], found["omega_rad_s"]))
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert any(label.startswith("recommended: U = ") for label in labels)
     assert "90 % of runs" in fig.axes[0].get_title()
-    none = window_figure(model, df, split, None, 1.0, n=21)      # R_q <= 1 um: nowhere
+    none = window_figure(model, df, split, {"max_roughness_um": 1.0}, n=21)      # R_q <= 1 um: nowhere
     assert none.recommended == [None]
     assert any("no setting meets the limits" in t.get_text() for t in none.axes[0].texts)
 
@@ -322,3 +323,70 @@ def test_a_smooth_model_draws_the_lines_when_the_trees_are_chosen(fit_params):
     assert name == "gp" and isinstance(smooth.model, GPSurrogate) and smooth.is_finite()
     fig = process_map_figure(smooth, df, (train, np.arange(35, 45)), n=31, note="Iso-lines of the gp")
     assert fig._supxlabel.get_text().startswith("Iso-lines of the gp. Grey crosses")
+
+
+# --- the layer-structure metrics beside the four ------------------------------------------------
+
+@pytest.fixture(scope="module")
+def layered():
+    """GPs of the four metrics and of the void fraction and coverage (2 % noise), calibrated by hand and
+    stacked as the surrogate rule stacks them; and their runs."""
+    df = structured_dataset(1, noise=0.02)
+    X, rng = inputs_of(df), np.random.default_rng(0)
+    four = CalibratedSurrogate(GPSurrogate(n_restarts=0).fit(X, targets_of(df)), np.ones(6), np.full(6, 0.02),
+                               np.abs(rng.standard_normal((45, 6))), 45, 0.9, "by hand")
+    layer = with_structure_metrics(df)[list(STRUCTURE_METRICS)].to_numpy()
+    structure = CalibratedSurrogate(GPSurrogate(n_restarts=0).fit(X, layer), np.ones(2), np.full(2, 0.02),
+                                    np.abs(rng.standard_normal((45, 2))), 45, 0.9, "by hand", list(STRUCTURE_METRICS))
+    return CalibratedStack([four, structure]), df
+
+
+def test_render_maps_draws_the_structure_metrics_like_the_four(layered, tmp_path):
+    from matplotlib.image import imread
+    model, df = layered
+    split = split_runs(df, 10, 0)
+    window = {"max_porosity_pct": None, "max_roughness_um": None, "max_void_fraction_pct": 33.0,
+              "min_coverage_pct": 80.0}
+    paths = render_maps(model, df, split, tmp_path, n=11, window=window)
+    names = {p.name for p in paths}
+    for m in (*METRICS, *STRUCTURE_METRICS):
+        assert {f"{m}_{kind}.png" for kind in ("surface", "contour", "interval", "parity")} <= names
+    assert imread(tmp_path / "void_fraction_pct_surface.png").shape[:2] == (975, 1200)
+    # the void fraction's parity plot: R of the test runs from the stacked model's fifth column
+    sim = with_structure_metrics(df)["void_fraction_pct"].to_numpy()
+    pred = model.predict(inputs_of(df))[:, 4]
+    svg = (tmp_path / "void_fraction_pct_parity.svg").read_text()
+    assert f"Test: R = {np.corrcoef(sim[split[1]], pred[split[1]])[0, 1]:.3f}" in svg
+
+
+def test_structure_surface_spans_its_own_predictions(layered):
+    from analysis.viz.maps import surface_figure
+    model, df = layered
+    points = with_structure_metrics(df)
+    fig = surface_figure(model, points, split_runs(df, 10, 0), "coverage_pct", n=11)
+    ax = fig.axes[0]
+    assert ax.get_zlabel() == "$C$ (%)" and ax.get_title().startswith("Substrate covered by the spread layer")
+    UU, WW = np.meshgrid(np.linspace(40, 100, 11), np.linspace(-20, 20, 11), indexing="ij")
+    Z = model.predict(np.column_stack([UU.ravel(), WW.ravel()]))[:, 5]
+    assert ax.get_zlim()[0] <= min(Z.min(), points["coverage_pct"].min())
+    assert ax.get_zlim()[1] >= max(Z.max(), points["coverage_pct"].max())
+
+
+def test_operating_window_with_a_coverage_and_a_void_fraction_limit(layered):
+    from analysis.surrogate.recommend import recommend
+    from analysis.viz.contours import window_figure
+    model, df = layered
+    split = split_runs(df, 10, 0)
+    meta = {"input_range": {"U_mm_s": [40.0, 100.0], "omega_rad_s": [-20.0, 20.0]}}
+    limits = {"max_void_fraction_pct": 36.0, "min_coverage_pct": 80.0}
+    found = recommend(model, meta, n=121, **limits)
+    fig = window_figure(model, df, split, limits, n=121)
+    best = fig.recommended[0]
+    assert (best["U_mm_s"], best["omega_rad_s"]) == pytest.approx((found["U_mm_s"], found["omega_rad_s"]))
+    assert found["coverage_pct_lo"] >= 80.0 and found["void_fraction_pct_hi"] <= 36.0
+    # coverage 1 - 0.5 / (1 + exp(-(omega - 5)/4)) >= 0.8 only below omega = 5 - 4 ln(1.5) = 3.4 rad/s
+    assert found["omega_rad_s"] < 3.4
+    title = fig.axes[0].get_title()
+    assert r"$\varepsilon$ ≤ 36 %" in title and "$C$ ≥ 80 %" in title
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert "coverage limit" in labels and any(r"$\varepsilon$ = " in label for label in labels)

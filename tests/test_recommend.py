@@ -113,3 +113,95 @@ def test_runs_as_a_module(model_file):
                            "--model", str(model_file)], cwd=ROOT, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert "Highest predicted throughput with porosity <= 34 %" in done.stdout
+
+
+# --- limits on the void fraction and the coverage ------------------------------------------------
+
+class LinearStructure:
+    """Exact layer-structure metrics: void fraction 10 + 0.3 U (%), coverage 60 + 2 omega (%)."""
+
+    def predict(self, X):
+        X = np.asarray(X, float)
+        return np.column_stack([10 + 0.3 * X[:, 0], 60 + 2 * X[:, 1]])
+
+
+@pytest.fixture(scope="module")
+def layered(known):
+    """The monotone network with the exact structure metrics stacked beside it; the scores as meta."""
+    from analysis.columns import METRICS, STRUCTURE_METRICS
+    from analysis.surrogate.intervals import SurrogateStack
+    return SurrogateStack([known[0], LinearStructure()], [list(METRICS), list(STRUCTURE_METRICS)]), known[1]
+
+
+@pytest.fixture(scope="module")
+def layered_file(layered, tmp_path_factory):
+    path = tmp_path_factory.mktemp("layered") / "model.joblib"
+    save_surrogate(layered[0], path, layered[1])
+    return path
+
+
+def test_a_void_fraction_limit_caps_U(layered):
+    found = recommend(*layered, max_void_fraction_pct=31.0)         # 10 + 0.3 U <= 31: U <= 70
+    assert found["U_mm_s"] == pytest.approx(70.0, abs=0.01) and found["void_fraction_pct"] <= 31.0
+    assert found["omega_rad_s"] == pytest.approx(-20.0, abs=0.5)
+    assert found["limits"] == {"max_void_fraction_pct": 31.0}
+    assert found["metrics"][4:] == ["void_fraction_pct", "coverage_pct"]
+
+
+def test_a_coverage_limit_excludes_the_best_unlimited_setting(layered):
+    free = recommend(*layered, max_porosity_pct=1e9)
+    assert (free["U_mm_s"], free["omega_rad_s"]) == pytest.approx((100.0, -20.0), abs=1.0)   # coverage 20 % there
+    found = recommend(*layered, min_coverage_pct=80.0)              # 60 + 2 omega >= 80: omega >= 10
+    assert found["omega_rad_s"] == pytest.approx(10.0, abs=0.01) and found["coverage_pct"] >= 80.0
+    assert found["U_mm_s"] == pytest.approx(100.0, abs=1.0)
+    both = recommend(*layered, max_void_fraction_pct=31.0, min_coverage_pct=80.0)
+    assert (both["U_mm_s"], both["omega_rad_s"]) == pytest.approx((70.0, 10.0), abs=0.01)
+    assert recommend(*layered, max_void_fraction_pct=21.0) is None  # 10 + 0.3 x 40 = 22 % at the least
+
+
+@pytest.mark.parametrize("limits, named", [
+    ({"min_coverage_pct": 150.0}, "--min-coverage must be a share from 0 to 100 %, got 150"),
+    ({"max_void_fraction_pct": -1.0}, "--max-void-fraction must be a non-negative number, got -1"),
+    ({"max_void_fraction_pct": float("nan")}, "--max-void-fraction must be a non-negative number, got nan"),
+])
+def test_bad_structure_limits_are_refused_by_value(layered, limits, named):
+    with pytest.raises(ValueError, match=re.escape(named)):
+        recommend(*layered, **limits)
+
+
+def test_a_model_without_the_structure_metrics_refuses_their_limits(known):
+    with pytest.raises(ValueError, match="--min-coverage: this model does not predict the coverage"):
+        recommend(*known, max_porosity_pct=40.0, min_coverage_pct=50.0)
+
+
+def test_cli_limits_the_void_fraction_and_the_coverage(layered_file, capsys):
+    assert main(["--max-void-fraction", "31", "--min-coverage", "80", "--model", str(layered_file)]) == 0
+    out = capsys.readouterr().out
+    assert "Highest predicted throughput with void fraction <= 31 % and coverage >= 80 %" in out
+    assert re.search(r"U\s+= 70\.0 mm/s", out) and "omega = 10.00 rad/s" in out
+    void = float(re.search(r"eps = ([\d.]+) % \(void fraction", out).group(1))
+    cover = float(re.search(r"  C = ([\d.]+) % \(coverage", out).group(1))
+    assert void == pytest.approx(31.0, abs=0.01) and cover == pytest.approx(80.0, abs=0.01)
+    assert main(["--max-void-fraction", "21", "--model", str(layered_file)]) == 1
+    out = capsys.readouterr().out
+    assert "the lowest predicted void fraction there is 22 %" in out
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["--min-coverage", "150"], "150"),
+    (["--max-void-fraction", "-5"], "-5"),
+    (["--max-void-fraction", "lots"], "lots"),
+    ([], "give at least one limit: --max-porosity, --max-roughness, --max-void-fraction, --min-coverage"),
+])
+def test_cli_bad_structure_limits_exit_2_naming_them(layered_file, capsys, argv, named):
+    with pytest.raises(SystemExit) as exit_:
+        main([*argv, "--model", str(layered_file)])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and err.count("\n") == 1 and named in err
+
+
+def test_cli_refuses_a_structure_limit_on_an_old_model(model_file, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--max-void-fraction", "30", "--model", str(model_file)])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "--max-void-fraction" in err and "refit it" in err

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.columns import METRICS, input_columns
+from analysis.columns import METRICS, STRUCTURE_METRICS, input_columns
 from analysis.io import atomic_path
 from analysis.physics import MAX_OVERLAP
 
@@ -91,6 +91,58 @@ def build_dataset(metrics_files, health_files, benchmark_files, out, level: str 
     return table
 
 
+def void_fraction_pct(packing_fraction):
+    """Void fraction of a layer, %: ``100 (1 - packing fraction)``.
+
+    Parameters
+    ----------
+    packing_fraction : array_like
+        Solid volume of the particles over the volume under the measured layer top,
+        ``L_x L_y thk_avg`` (dimensionless; dataset.csv's ``packing_fraction``).
+
+    Returns
+    -------
+    numpy.ndarray
+        The void share of that volume [%]; NaN where the packing fraction is (an empty layer).
+    """
+    return 100.0 * (1.0 - np.asarray(packing_fraction, float))
+
+
+def coverage_pct(coverage):
+    """Coverage of the substrate, %: ``100 x`` the share of profilometer probes that hit powder
+    (``coverage`` of dataset.csv, dimensionless)."""
+    return 100.0 * np.asarray(coverage, float)
+
+
+#: Each layer-structure metric's source column in dataset.csv and its derivation.
+_STRUCTURE_SOURCES = {"void_fraction_pct": ("packing_fraction", void_fraction_pct),
+                      "coverage_pct": ("coverage", coverage_pct)}
+
+
+def with_structure_metrics(df):
+    """The runs with the layer-structure metrics (:data:`analysis.columns.STRUCTURE_METRICS`) as columns.
+
+    ``void_fraction_pct`` [%] from ``packing_fraction`` and ``coverage_pct`` [%] from ``coverage``
+    (:func:`void_fraction_pct`, :func:`coverage_pct`), for the source columns ``df`` has; the
+    others are left as they are. Returns a new frame; ``df`` is not changed.
+    """
+    return df.assign(**{m: derive(df[source]) for m, (source, derive) in _STRUCTURE_SOURCES.items()
+                        if source in df})
+
+
+def structure_problem(df):
+    """Why the layer-structure metrics of ``df`` (after :func:`with_structure_metrics`) cannot be
+    fitted, as text, or None when every run has them finite."""
+    missing = [m for m in STRUCTURE_METRICS if m not in df]
+    if missing:
+        return "the dataset lacks " + ", ".join(_STRUCTURE_SOURCES[m][0] for m in missing)
+    bad = ~np.isfinite(df[list(STRUCTURE_METRICS)].to_numpy(float)).all(axis=1)
+    if bad.any():
+        return (f"runs {np.flatnonzero(bad).tolist()} have no finite packing fraction or coverage "
+                "(an empty layer)")
+    return None
+
+
 def point_groups(df):
     """Label of each run's point (U, omega and any extra axes), numbered in order of first appearance.
 
@@ -119,7 +171,8 @@ def point_means(df, split=None):
     Parameters
     ----------
     df : pandas.DataFrame
-        The runs (speeds and the four metrics).
+        The runs (speeds and the four metrics; the layer-structure metrics too, where it has
+        their columns: :func:`with_structure_metrics`).
     split : (array of int, array of int), optional
         Row positions of the training and test runs (by point, see
         :func:`split_runs`); mapped to point positions.
@@ -135,12 +188,13 @@ def point_means(df, split=None):
         Point positions of the training and test points.
     """
     groups, inputs = point_groups(df), input_columns(df)
-    frame = df[inputs + list(METRICS)].assign(_point=groups)
+    metrics = [*METRICS, *(m for m in STRUCTURE_METRICS if m in df)]
+    frame = df[inputs + metrics].assign(_point=groups)
     grouped = frame.groupby("_point", sort=True)
-    points = grouped[inputs + list(METRICS)].mean().reset_index(drop=True)
+    points = grouped[inputs + metrics].mean().reset_index(drop=True)
     points.insert(len(inputs), "n_replicates", grouped.size().to_numpy())
-    sd = grouped[list(METRICS)].std(ddof=1).fillna(0.0).reset_index(drop=True)
-    for m in METRICS:
+    sd = grouped[metrics].std(ddof=1).fillna(0.0).reset_index(drop=True)
+    for m in metrics:
         points[f"{m}_sd"] = sd[m].to_numpy()
     if split is None:
         return points, None

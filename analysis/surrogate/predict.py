@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.columns import METRICS
-from analysis.surrogate.intervals import PRODUCTS, interval_frame
+from analysis.surrogate.intervals import PRODUCTS, interval_frame, metrics_of
 
 
 def metric_maxima(frame):
@@ -70,8 +70,9 @@ def predict_with_std(model, U, omega, extra=None):
 
     Returns
     -------
-    mean, std : numpy.ndarray, shape (n, 4)
-        Columns in :data:`METRICS` order, in the metrics' units.  ``std`` is
+    mean, std : numpy.ndarray, shape (n, k)
+        Columns in the model's metrics' order (:func:`analysis.surrogate.intervals.metrics_of`:
+        the four of :data:`METRICS`, then any layer-structure metrics), in their units.  ``std`` is
         the uncertainty of the predicted *mean* metric (not the seed-to-seed
         scatter of a single run, see :mod:`analysis.metrics.noise_floor`).
 
@@ -99,8 +100,10 @@ def predict_frame(model, U, omega, confidence=None, extra=None):
 
     ``extra`` gives the model's further inputs (``{axis: array or scalar}``, the model's
     input order, config units), when it has any. Returns a frame of the inputs and the
-    four metrics; when the model gives a predictive standard deviation (:func:`provides_std`), also
-    ``<metric>_std`` columns in the metric's unit; when it gives calibrated intervals
+    model's metrics (:func:`analysis.surrogate.intervals.metrics_of`: the four, then the
+    layer-structure metrics of a model that has them); when the model gives a predictive
+    standard deviation (:func:`provides_std`), also ``<metric>_std`` columns in the metric's
+    unit; when it gives calibrated intervals
     (:func:`provides_intervals`), their columns (:func:`analysis.surrogate.intervals.interval_frame`)
     at ``confidence`` (default: the model's level).
     """
@@ -110,11 +113,10 @@ def predict_frame(model, U, omega, confidence=None, extra=None):
         pred, std = predict_with_std(model, X[:, 0], X[:, 1], dict(zip(extra or {}, X[:, 2:].T)))
     else:
         pred, std = model.predict(X), None
-    for j, m in enumerate(METRICS):
-        frame[m] = pred[:, j]
+    metrics = metrics_of(model)
+    frame[list(metrics)] = pred
     if std is not None:
-        for j, m in enumerate(METRICS):
-            frame[f"{m}_std"] = std[:, j]
+        frame[[f"{m}_std" for m in metrics]] = std
     if provides_intervals(model):
         frame = pd.concat([frame, interval_frame(model, X, confidence)], axis=1)
     return frame
@@ -163,8 +165,9 @@ def predict_grid(model, U_range, omega_range, n, confidence=None, extra=None):
     -------
     pandas.DataFrame
         n*n rows per combination of the extra values (those outer, in order, then U,
-        then omega): ``U_mm_s``, ``omega_rad_s``, the extra inputs, the four
-        metrics in their units, and the dimensionless ``throughput_index`` and
+        then omega): ``U_mm_s``, ``omega_rad_s``, the extra inputs, the model's
+        metrics in their units (the four, then the layer-structure metrics of a model that
+        has them: :func:`predict_frame`), and the dimensionless ``throughput_index`` and
         ``defect_index`` (:func:`hybrid_indices`, maxima over this grid).  When
         the model gives a predictive standard deviation, also
         ``<metric>_std`` (metric units) and ``throughput_index_std``,

@@ -28,13 +28,15 @@ def pearson_r(y_true, y_pred):
         return np.where(den > 0, (a * b).sum(axis=0) / den, np.nan)
 
 
-def regression_scores(y_true, y_pred):
+def regression_scores(y_true, y_pred, metrics=METRICS):
     """R, R^2 and MAPE per metric.
 
     Parameters
     ----------
-    y_true, y_pred : numpy.ndarray, shape (n, 4)
-        Simulated and predicted metrics, columns in :data:`METRICS` order.
+    y_true, y_pred : numpy.ndarray, shape (n, k)
+        Simulated and predicted metrics, columns in ``metrics`` order.
+    metrics : sequence of str
+        The metrics' names (default the paper's four, :data:`METRICS`).
 
     Returns
     -------
@@ -57,7 +59,7 @@ def regression_scores(y_true, y_pred):
         mape = 100.0 * np.where(nonzero, rel, 0.0).sum(axis=0) / n_nonzero
     return {m: {"R": json_number(r[j]), "R2": json_number(r2[j]), "MAPE_pct": json_number(mape[j]),
                 "n_nonzero": int(n_nonzero[j])}
-            for j, m in enumerate(METRICS)}
+            for j, m in enumerate(metrics)}
 
 
 def json_number(x):

@@ -17,14 +17,22 @@ from analysis.columns import INPUTS, input_columns, input_units
 from analysis.io import atomic_path
 from analysis.surrogate.predict import predict_frame, with_indices
 
+#: Each mapped metric's symbol and unit (matplotlib mathtext).
+MATH = {
+    "mass_g": ("$M_s$", "g"),
+    "throughput_mm2_s": ("$Q_s$", "mm$^2$/s"),
+    "roughness_um": ("$R_q$", r"$\mu$m"),
+    "porosity_pct": (r"$\Phi$", "%"),
+    "void_fraction_pct": (r"$\varepsilon$", "%"),
+    "coverage_pct": ("$C$", "%"),
+}
+
+
 #: Axis labels with units (matplotlib mathtext).
 LABELS = {
     "U_mm_s": "$U$ (mm/s)",
     "omega_rad_s": r"$\omega$ (rad/s)",
-    "mass_g": "$M_s$ (g)",
-    "throughput_mm2_s": "$Q_s$ (mm$^2$/s)",
-    "roughness_um": r"$R_q$ ($\mu$m)",
-    "porosity_pct": r"$\Phi$ (%)",
+    **{m: f"{symbol} ({unit})" for m, (symbol, unit) in MATH.items()},
 }
 
 
@@ -33,7 +41,9 @@ TITLES = {
     "mass_g": "Powder mass in the sampling region",
     "throughput_mm2_s": "Spread throughput",
     "roughness_um": "Spread layer roughness",
-    "porosity_pct": "Spread layer porosity",
+    "porosity_pct": "Spread layer porosity (eq. 7)",
+    "void_fraction_pct": "Spread layer void fraction, 1 - packing fraction",
+    "coverage_pct": "Substrate covered by the spread layer",
 }
 
 

@@ -3,15 +3,16 @@
 ``report/workflow.rst``, the front page of Snakemake's report, includes the file
 :func:`write_front_page` writes (``results/<level>/front_page.rst``): the operating
 window's recommended setting, the chosen model and why, the paper's network's test R
-with its spread over seeded splits, and the size of the dataset.
+with its spread over seeded splits, the layer-structure metrics' scores (void fraction and
+coverage, mapped beside eq. 7's porosity), and the size of the dataset.
 """
 from __future__ import annotations
 
-from analysis.columns import METRICS, SHORT_NAMES, input_units
+from analysis.columns import METRICS, SHORT_NAMES, STRUCTURE_METRICS, input_units
 from analysis.io import write_text
 from analysis.surrogate.candidates import CANDIDATES
 from analysis.surrogate.predict import provides_intervals
-from analysis.surrogate.recommend import recommend
+from analysis.surrogate.recommend import check_limits, limits_text, recommend
 from analysis.surrogate.selection import choice_rule_text, decide
 
 
@@ -23,19 +24,35 @@ def window_setting(model, meta, window):
     """
     finite = provides_intervals(model) and model.is_finite()
     judged = model if finite or not provides_intervals(model) else model.model
-    found = recommend(judged, meta, window.get("max_porosity_pct"), window.get("max_roughness_um"))
+    found = recommend(judged, meta, **check_limits(window))
     if finite:
         return found, f"the upper end of the {100 * model.confidence:g} % single-run interval within each limit"
     return found, "the predicted mean within each limit (too few runs for a finite interval)"
 
 
-def _limits(window):
-    parts = []
-    if window.get("max_porosity_pct") is not None:
-        parts.append(f"porosity <= {window['max_porosity_pct']:g} %")
-    if window.get("max_roughness_um") is not None:
-        parts.append(f"roughness R_q <= {window['max_roughness_um']:g} um")
-    return " and ".join(parts) or "no limits"
+def _structure_values(found):
+    """The found setting's layer-structure metrics as text (', void fraction 35 %, coverage 98 %'), if any."""
+    names = {"void_fraction_pct": "void fraction", "coverage_pct": "coverage"}
+    return "".join(f", {names[m]} {found[m]:.3g} %" for m in STRUCTURE_METRICS if m in found)
+
+
+def _num(x):
+    return "n/a" if x is None else f"{x:.3f}"
+
+
+def structure_line(record):
+    """The layer-structure metrics' paragraph: their test R and k-fold R^2 (``scores.json``'s ``structure``)."""
+    if not record:
+        return ""
+    if "skipped" in record:
+        return f"**Layer structure** (void fraction, coverage): not fitted, {record['skipped']}."
+    names = {"void_fraction_pct": "void fraction eps = 100 (1 - packing fraction)", "coverage_pct": "coverage C"}
+    scores = "; ".join(f"{names[m]}: test R {_num(record['test'][m]['R'])}, k-fold R^2 "
+                       f"{_num(record['cv']['kfold'][m]['R2'])}" for m in STRUCTURE_METRICS)
+    return ("**Layer structure beside eq. 7** (``maps/void_fraction_pct_*.png``, ``maps/coverage_pct_*.png``): "
+            "eq. 7's Phi takes 4 R_q as the layer's thickness, so it reads deep deposits as dense and thin, "
+            f"patchy layers as porous; the same model ({record['model']}) maps the {scores} "
+            "(``surrogate/scores.json``, ``structure``).")
 
 
 def front_page_rst(scores, choice, window=None, found=None, rule=""):
@@ -44,7 +61,8 @@ def front_page_rst(scores, choice, window=None, found=None, rule=""):
     Parameters
     ----------
     scores : dict
-        scores.json (the paper's network's ``test`` and ``test_spread``, the chosen ``model``).
+        scores.json (the paper's network's ``test`` and ``test_spread``, the chosen ``model``, the
+        layer-structure metrics' ``structure``).
     choice : pandas.DataFrame
         model_choice.csv.
     window : dict, optional
@@ -57,7 +75,7 @@ def front_page_rst(scores, choice, window=None, found=None, rule=""):
     symbols = " / ".join(s for s, _ in METRICS.values())
     lines = []
     if window is not None:
-        lines += ["**The operating window** (``maps/operating_window.png``): " + _limits(window) + ", judged by "
+        lines += ["**The operating window** (``maps/operating_window.png``): " + limits_text(window) + ", judged by "
                   + rule + ". "]
         if found is None or not found.get("meets_confidence", True):
             lines[-1] += "**No setting in the swept range meets them**: relax the limits or simulate elsewhere."
@@ -67,7 +85,8 @@ def front_page_rst(scores, choice, window=None, found=None, rule=""):
                                 for c in found["inputs"])
             lines[-1] += (f"The highest predicted throughput there: **{setting}**, with Q_s "
                           f"{found['throughput_mm2_s']:.3g} mm^2/s, M_s {found['mass_g']:.3g} g, R_q "
-                          f"{found['roughness_um']:.3g} um, Phi {found['porosity_pct']:.3g} %; "
+                          f"{found['roughness_um']:.3g} um, Phi {found['porosity_pct']:.3g} %"
+                          f"{_structure_values(found)}; "
                           f"{found['n_feasible']} of {found['n_grid']} settings of the search grid meet the limits.")
         lines.append("")
     name = scores["model"]["name"]
@@ -93,6 +112,8 @@ def front_page_rst(scores, choice, window=None, found=None, rule=""):
                       + (" The R of two test runs is +-1 whatever the fit: too few to score." if
                          spread.get("n_test", 10) < 3 else ""))
     lines.append("")
+    if scores.get("structure"):
+        lines += [structure_line(scores["structure"]), ""]
     return "\n".join(lines)
 
 

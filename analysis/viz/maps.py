@@ -1,6 +1,7 @@
 """Every figure of a study's maps (:func:`render_maps`): for each map set (:func:`map_views`) the
-regressed surfaces and parity plots of the paper's Figures 6-9 (:mod:`analysis.viz.surfaces`),
-the contour and operating-window maps (:mod:`analysis.viz.contours`) and the process map of its
+regressed surfaces and parity plots of the paper's Figures 6-9 (:mod:`analysis.viz.surfaces`), and
+the same of the layer-structure metrics beside them (void fraction and coverage, when the model
+has them), the contour and operating-window maps (:mod:`analysis.viz.contours`) and the process map of its
 Figure 10 (:mod:`analysis.viz.process_map`), written as PNG and SVG.
 """
 from __future__ import annotations
@@ -11,10 +12,11 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 
-from analysis.columns import INPUTS, METRICS, input_columns
+from analysis.columns import INPUTS, input_columns
 from analysis.config.sweep import variant_path
-from analysis.metrics.dataset import point_means
+from analysis.metrics.dataset import point_means, with_structure_metrics
 from analysis.surrogate.data import inputs_of
+from analysis.surrogate.intervals import metrics_of
 from analysis.surrogate.predict import provides_intervals
 from analysis.viz.contours import contour_figure, window_figure
 from analysis.viz.figures import MapView, save_figure
@@ -87,7 +89,9 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
         Fitted surrogate.
     df : pandas.DataFrame
         The simulated runs it was fitted on (replicates are drawn as their
-        mean, :func:`analysis.surrogate.data.point_means`).
+        mean, :func:`analysis.metrics.dataset.point_means`; the layer-structure metrics
+        derived from its ``packing_fraction`` and ``coverage``,
+        :func:`analysis.metrics.dataset.with_structure_metrics`).
     split : (array of int, array of int)
         Row positions of the training and test runs.
     outdir : str or pathlib.Path
@@ -98,8 +102,9 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
     axes, hold, panels
         As :func:`map_views` (config ``maps``).
     window : dict, optional
-        ``max_porosity_pct`` and ``max_roughness_um`` (None: no limit) of the operating window
-        (config ``maps.operating_window``); None: no window map.
+        The operating window's limits (config ``maps.operating_window``: ``max_porosity_pct``,
+        ``max_roughness_um``, ``max_void_fraction_pct``, ``min_coverage_pct``; None: no limit;
+        :data:`analysis.surrogate.recommend.LIMITS`); None: no window map.
     lines_model : estimator, optional
         Draws the process map instead of ``model`` (a smooth model's iso-lines when the chosen
         one is piecewise flat), ``lines_note`` saying so in its caption.
@@ -107,26 +112,30 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
     Returns
     -------
     list of pathlib.Path
-        ``<metric>_parity.{png,svg}`` (every point, once, in ``outdir``), and per map set
-        ``<metric>_surface.{png,svg}``, ``<metric>_contour.{png,svg}``, when the model gives
-        calibrated intervals ``<metric>_interval.{png,svg}`` (metric = dataset column, e.g.
-        ``mass_g``), then ``process_map.{png,svg}`` and with ``window``
+        For every metric the model predicts (:func:`analysis.surrogate.intervals.metrics_of`:
+        the paper's four, then the layer-structure metrics ``void_fraction_pct`` and
+        ``coverage_pct`` when it has them) ``<metric>_parity.{png,svg}`` (every point, once, in
+        ``outdir``), and per map set ``<metric>_surface.{png,svg}``, ``<metric>_contour.{png,svg}``,
+        when the model gives calibrated intervals ``<metric>_interval.{png,svg}`` (metric =
+        dataset column, e.g. ``mass_g``), then ``process_map.{png,svg}`` and with ``window``
         ``operating_window.{png,svg}``.
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    points, split = point_means(df, tuple(np.asarray(rows, int) for rows in split))
+    points, split = point_means(with_structure_metrics(df), tuple(np.asarray(rows, int) for rows in split))
+    metrics = metrics_of(model)
     paths = []
     with matplotlib.rc_context(_STYLE):
         predicted = model.predict(inputs_of(points))
-        for metric in METRICS:
-            paths += save_figure(parity_figure(points, predicted, split, metric), outdir, f"{metric}_parity")
+        for metric in metrics:
+            paths += save_figure(parity_figure(points, predicted, split, metric, metrics), outdir,
+                                 f"{metric}_parity")
         for values, views in map_views(points, axes, hold, panels):
             where = outdir / variant_path(values)
             where.mkdir(parents=True, exist_ok=True)
             drawn = [(view, points.iloc[rows].reset_index(drop=True),
                       tuple(np.flatnonzero(np.isin(rows, part)) for part in split)) for view, rows in views]
-            for metric in METRICS:
+            for metric in metrics:
                 paths += save_figure(surface_figure(model, None, None, metric, n, panels=drawn), where,
                                      f"{metric}_surface")
                 paths += save_figure(contour_figure(model, None, None, metric, max(n, 61), panels=drawn), where,
@@ -137,7 +146,6 @@ def render_maps(model, df, split, outdir, n=41, axes=tuple(INPUTS), hold=None, p
             paths += save_figure(process_map_figure(lines_model or model, None, None, max(n, 101), panels=drawn,
                                                     note=lines_note), where, "process_map")
             if window is not None:
-                paths += save_figure(window_figure(model, None, None, window.get("max_porosity_pct"),
-                                                   window.get("max_roughness_um"), panels=drawn),
-                                     where, "operating_window")
+                paths += save_figure(window_figure(model, None, None, window, panels=drawn), where,
+                                     "operating_window")
     return paths

@@ -40,7 +40,8 @@ def surface_figure(model, df, split, metric, n=41, view=None, panels=None):
     split : (array of int, array of int)
         Row positions of the training and test points.
     metric : str
-        One of :data:`analysis.surrogate.data.METRICS`.
+        One of the model's metrics (:func:`analysis.surrogate.intervals.metrics_of`: the paper's
+        four of :data:`analysis.columns.METRICS`, then any layer-structure metrics).
     n : int
         Surface grid points per axis, over the points' range.
     view : MapView, optional
@@ -105,7 +106,7 @@ def interval_figure(model, df, split, metric, n=41, view=None, panels=None):
     split : (array of int, array of int)
         Positions of the training and test points in ``df``.
     metric : str
-        One of METRICS.
+        One of the model's metrics, as :func:`surface_figure`'s.
     n : int
         Grid points per axis.
     view, panels
@@ -148,26 +149,29 @@ def interval_figure(model, df, split, metric, n=41, view=None, panels=None):
     return fig
 
 
-def parity_figure(df, predicted, split, metric):
+def parity_figure(df, predicted, split, metric, metrics=METRICS):
     """Simulated against predicted values of one metric, training and test (Figures 6-9 b, c).
 
     Parameters
     ----------
     df : pandas.DataFrame
         The simulated runs.
-    predicted : numpy.ndarray, shape (n, 4)
-        Surrogate predictions for the runs, columns in METRICS order.
+    predicted : numpy.ndarray, shape (n, k)
+        Surrogate predictions for the runs, columns in ``metrics`` order.
     split : (array of int, array of int)
         Row positions of the training and test runs.
     metric : str
-        One of METRICS.
+        One of ``metrics``.
+    metrics : sequence of str
+        The columns of ``predicted`` (default the paper's four, METRICS; a model's own:
+        :func:`analysis.surrogate.intervals.metrics_of`).
 
     Returns
     -------
     matplotlib.figure.Figure
         Two panels, each with the 1:1 line and R in its title.
     """
-    j = list(METRICS).index(metric)
+    j = list(metrics).index(metric)
     sim, pred = df[metric].to_numpy(float), predicted[:, j]
     lo, hi = min(sim.min(), pred.min()), max(sim.max(), pred.max())
     pad = 0.05 * (hi - lo or 1.0)
