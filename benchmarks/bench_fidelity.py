@@ -201,8 +201,9 @@ def convergence(runs: pd.DataFrame, ladder: list[str]) -> pd.DataFrame:
         pooled = (sds.loc[b] ** 2).mean() ** 0.5
         in_sd = shift.abs().max() / pooled
         rel = (shift / means.loc[b].loc[shift.index]).mean()
-        rows.append({"step": f"{a} -> {b}", "points": len(shift),
-                     **{f"{METRICS[k]} shift (sd of {b})": in_sd[k] for k in METRICS},
+        rows.append({"step": f"{a} -> {b}", "points": len(shift), "finer seeds": int(runs.loc[
+                         runs["variant"] == b, "seed"].nunique()),
+                     **{f"{METRICS[k]} shift (finer sds)": in_sd[k] for k in METRICS},
                      **{f"{METRICS[k]} change (%)": 100 * rel[k] for k in METRICS},
                      "converged": bool((in_sd <= 1).all())})
     return pd.DataFrame(rows)

@@ -25,14 +25,14 @@ def test_a_step_is_judged_in_the_finer_scenes_sd_not_the_coarser_ones():
     shifted = {**base, "roughness_um": 80.0 * 1.05}          # R_q 5 % off: 2.5 finer sds, 0.25 coarse
     runs = pd.DataFrame(runs_of("soft", shifted, noisy) + runs_of("stiff", base, tight))
     (step,) = convergence(runs, ["soft", "stiff"]).to_dict("records")
-    assert step["step"] == "soft -> stiff" and step["points"] == 2
-    assert step["R_q shift (sd of stiff)"] == pytest.approx(2.5)
+    assert step["step"] == "soft -> stiff" and step["points"] == 2 and step["finer seeds"] == 3
+    assert step["R_q shift (finer sds)"] == pytest.approx(2.5)
     assert step["R_q change (%)"] == pytest.approx(5.0)
-    assert step["M_s shift (sd of stiff)"] == pytest.approx(0.0, abs=1e-9)
+    assert step["M_s shift (finer sds)"] == pytest.approx(0.0, abs=1e-9)
     assert not step["converged"]
     # the same shift judged in the noisy scene's sd would pass: the order matters
     (back,) = convergence(runs, ["stiff", "soft"]).to_dict("records")
-    assert back["R_q shift (sd of soft)"] == pytest.approx(4.0 / 16.0) and back["converged"]
+    assert back["R_q shift (finer sds)"] == pytest.approx(4.0 / 16.0) and back["converged"]
 
 
 def test_mass_is_compared_per_unit_sampling_area_and_failed_runs_are_left_out():
@@ -43,7 +43,7 @@ def test_mass_is_compared_per_unit_sampling_area_and_failed_runs_are_left_out():
     narrow = pd.DataFrame(runs_of("narrow", base, sds)).assign(sampling_area_mm2=5.0)
     broken = pd.DataFrame([{"variant": "narrow", "U_mm_s": 70, "omega_rad_s": -15, "error": "ERROR: lost atoms"}])
     (step,) = convergence(pd.concat([narrow, broken, wide]), ["narrow", "wide"]).to_dict("records")
-    assert step["M_s shift (sd of wide)"] == pytest.approx(0.0, abs=1e-9) and step["converged"]
+    assert step["M_s shift (finer sds)"] == pytest.approx(0.0, abs=1e-9) and step["converged"]
 
 
 def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_writes_its_tables(tmp_path):
