@@ -272,6 +272,20 @@ def test_trees_win_only_by_more_than_the_standard_error():
     assert "+- 0.0100" in text and "tied with it: mlp 0.9197" in text and "first listed smooth model, **mlp**" in text
 
 
+def test_trees_predict_what_their_trees_predict(noisy):
+    """TreeEnsemble.predict skips each tree's input checks: the mean and spread of the trees'
+    own predict(), exactly, for several targets and for one."""
+    X, Y = inputs_of(noisy), targets_of(noisy)
+    grid = np.c_[np.linspace(40, 100, 7), np.linspace(-20, 20, 7)]
+    for y in (Y, Y[:, 2]):
+        model = TreeEnsemble(n_trees=25).fit(X, y)
+        trees = np.stack([t.predict(grid) for t in model.forest_.estimators_]).reshape(25, len(grid), -1)
+        mean, std = model.predict(grid, return_std=True)
+        np.testing.assert_array_equal(mean, model._shaped(trees.mean(axis=0) * model.y_scale_ + model.y_mean_))
+        np.testing.assert_array_equal(std, model._shaped(trees.std(axis=0) * model.y_scale_))
+        assert mean.shape == ((7, 4) if y.ndim == 2 else (7,))
+
+
 def test_fold_scores_average_to_the_pooled_r2():
     rng = np.random.default_rng(1)
     Y = rng.normal(size=(45, 4)) * [1e-3, 10, 5, 3]

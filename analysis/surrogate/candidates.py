@@ -239,7 +239,10 @@ class TreeEnsemble(MetricsRegressor):
     def predict(self, X, return_std=False):
         """Forest mean (n, 4); with ``return_std`` also the trees' standard deviation."""
         X = self._validate_predict(X)
-        P = np.stack([t.predict(X) for t in self.forest_.estimators_]).reshape(
+        # each tree's own predict() re-validates X (about 0.3 ms a tree, 300 trees a call); its tree_.predict
+        # on the float32 X that predict() would make gives the same numbers
+        X32 = np.ascontiguousarray(X, dtype=np.float32)
+        P = np.stack([t.tree_.predict(X32).reshape(len(X), -1) for t in self.forest_.estimators_]).reshape(
             len(self.forest_.estimators_), len(X), -1)
         mean = P.mean(axis=0) * self.y_scale_ + self.y_mean_
         if not return_std:
