@@ -341,6 +341,16 @@ def test_trees_predict_what_their_trees_predict(noisy):
         assert mean.shape == ((7, 4) if y.ndim == 2 else (7,))
 
 
+def test_ensemble_members_fitted_in_parallel_are_the_same(noisy, fit_params):
+    params = {**fit_params, "hidden_units": 20, "n_init": 1}
+    X, Y = inputs_of(noisy), targets_of(noisy)
+    serial = MLPEnsemble(params, n_members=3).fit(X, Y)
+    parallel = MLPEnsemble(params, n_members=3, n_jobs=2).fit(X, Y)
+    for a, b in zip(serial.predict(X, return_std=True), parallel.predict(X, return_std=True)):
+        np.testing.assert_array_equal(a, b)
+    assert serial.predict(X, return_std=True)[1].min() > 0          # three different networks
+
+
 def test_fold_scores_average_to_the_pooled_r2():
     rng = np.random.default_rng(1)
     Y = rng.normal(size=(45, 4)) * [1e-3, 10, 5, 3]

@@ -557,8 +557,9 @@ def read_choice(csv_path):
     return str(chosen[0]), table
 
 
-def fit_chosen(df, params, name, train_idx=None):
-    """Fit candidate ``name`` on the runs ``train_idx`` (default all) of ``df``.
+def fit_chosen(df, params, name, train_idx=None, n_jobs=1):
+    """Fit candidate ``name`` on the runs ``train_idx`` (default all) of ``df``; ``n_jobs``: the
+    network ensemble's members fitted at once (the fit does not depend on it).
 
     Returns
     -------
@@ -571,6 +572,8 @@ def fit_chosen(df, params, name, train_idx=None):
     X, Y = inputs_of(df), targets_of(df)
     rows = np.arange(len(df)) if train_idx is None else np.asarray(train_idx, int)
     model = make_candidate(name, params)
+    if name == "mlp":
+        model.set_params(n_jobs=n_jobs)
     t0 = time.perf_counter()
     with convergence_messages() as messages:
         model.fit(X[rows], Y[rows])
@@ -584,14 +587,14 @@ def fit_chosen(df, params, name, train_idx=None):
     return model, info
 
 
-def fit_calibrated(df, params, name, train_idx, predictions):
-    """Candidate ``name`` fitted on the runs ``train_idx`` (:func:`fit_chosen`), its intervals calibrated
-    on its k-fold held-out predictions (``predictions``: cv_predictions.csv, every candidate's).
+def fit_calibrated(df, params, name, train_idx, predictions, n_jobs=1):
+    """Candidate ``name`` fitted on the runs ``train_idx`` (:func:`fit_chosen`, ``n_jobs``), its intervals
+    calibrated on its k-fold held-out predictions (``predictions``: cv_predictions.csv, every candidate's).
 
     Returns (the :class:`analysis.surrogate.intervals.CalibratedSurrogate`, :func:`fit_chosen`'s info,
     the noise's source as text).
     """
-    model, info = fit_chosen(df, params, name, train_idx)
+    model, info = fit_chosen(df, params, name, train_idx, n_jobs)
     held_out = predictions[(predictions["model"] == name) & (predictions["scheme"] == "kfold")]
     rho, source = relative_noise(df, random_state=int(params["random_state"]))
     return calibrated_from_predictions(model, held_out, df, rho, params["confidence"], source), info, source
