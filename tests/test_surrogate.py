@@ -15,7 +15,8 @@ from sklearn.exceptions import ConvergenceWarning
 from analysis.columns import METRICS
 from analysis.surrogate.candidates import GPSurrogate
 from analysis.surrogate.data import inputs_of, point_folds, read_split, split_runs, split_table, targets_of
-from analysis.surrogate.network import deviation_from_paper, fit_surrogate, make_surrogate, test_r_spread
+from analysis.surrogate.network import deviation_from_paper, fit_surrogate, make_surrogate
+from analysis.surrogate.network import test_r_spread as r_spread  # not a test of pytest's
 from analysis.surrogate.persistence import load_surrogate, save_surrogate
 from analysis.surrogate.predict import hybrid_indices, predict_grid
 from analysis.surrogate.scores import R_TARGET, regression_scores
@@ -114,11 +115,11 @@ def test_fits_at_once_are_the_fits_one_at_a_time(fit_params):
     by_sklearn = regression_scores(Y, reference)      # the same predictions, summed in another memory order
     for m in METRICS:
         assert two["cv"][m] == pytest.approx(by_sklearn[m], rel=1e-12), m
-    refitted = test_r_spread(data, params, 3, n_jobs=2)
-    reused = test_r_spread(data, params, 3, known={0: one["test"]})
+    refitted = r_spread(data, params, 3, n_jobs=2)
+    reused = r_spread(data, params, 3, known={0: one["test"]})
     assert refitted == reused and refitted["mass_g"]["R"][0] == one["test"]["mass_g"]["R"]
     made_up = {m: {**one["test"][m], "R": 0.5} for m in METRICS}
-    assert test_r_spread(data, params, 3, known={0: made_up})["mass_g"]["R"] == [0.5, *refitted["mass_g"]["R"][1:]]
+    assert r_spread(data, params, 3, known={0: made_up})["mass_g"]["R"] == [0.5, *refitted["mass_g"]["R"][1:]]
 
 
 def test_papers_literal_adam_setting_does_not_converge(dataset, fit_params):
