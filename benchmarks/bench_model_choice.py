@@ -56,6 +56,7 @@ def main(argv=None):
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks/measured/model_choice.md")
     args = parser.parse_args(argv)
     params = yaml.safe_load((ROOT / "config.yaml").read_text())["surrogate"]
+    params["cv_loo"] = True       # every candidate's leave-one-point-out (config.yaml: the tied ones only): their cost
     df = noisy_dataset(args.seed)
     load = os.getloadavg()[0]
     rows, chosen = [], {}

@@ -21,13 +21,14 @@ from analysis.surrogate.structure import format_structure, stack_structure
 with rule_context(snakemake):
     out, params = snakemake.output, snakemake.params.surrogate
     df = pd.read_csv(snakemake.input.dataset)
-    _, scores = fit_surrogate(df, params)          # the paper's network: the reference scores
+    _, scores = fit_surrogate(df, params, n_jobs=snakemake.threads)   # the paper's network: the reference scores
     print(format_scores(scores))
-    scores["test_spread"] = test_r_spread(df, params, params.get("test_splits", 20), n_jobs=snakemake.threads)
+    scores["test_spread"] = test_r_spread(df, params, params.get("test_splits", 20), n_jobs=snakemake.threads,
+                                          known={int(params["split_seed"]): scores["test"]})   # split 0: that fit
     print(format_spread(scores["test_spread"]))
     name, table = read_choice(snakemake.input.choice)
     model, info, source = fit_calibrated(df, params, name, scores["split"]["train"],
-                                         pd.read_csv(snakemake.input.predictions))
+                                         pd.read_csv(snakemake.input.predictions), n_jobs=snakemake.threads)
     scores["model"] = {**chosen_summary(model, info, df, scores["split"], table), "intervals": model.summary()}
     print(f"intervals: {model.method}; {100 * model.confidence:g} % multiplier "
           + " / ".join(f"{q:.2f}" for q in model.multiplier()[:4]) + f"; noise: {source}")

@@ -23,5 +23,6 @@ with rule_context(snakemake):
     ceiling = accuracy_ceiling(df)
     write_model_choice(table, chosen, snakemake.output.csv, snakemake.output.md, ceiling,
                        snakemake.params.level, params["confidence"], least, predictions,
-                       snakemake.output.predictions)
-    print(model_choice_markdown(table, chosen, ceiling, snakemake.params.level, params["confidence"], least))
+                       snakemake.output.predictions, cv_loo=params["cv_loo"])
+    print(model_choice_markdown(table, chosen, ceiling, snakemake.params.level, params["confidence"], least,
+                                params["cv_loo"]))

@@ -20,6 +20,7 @@ from analysis.surrogate.selection import (
     choose_model,
     cross_validate_models,
     fold_scores,
+    loo_candidates,
     model_choice_markdown,
     read_choice,
     write_model_choice,
@@ -199,7 +200,7 @@ def cv_small(fit_params):
         return synthetic_metrics(U, omega)
     df = replicated(2, 0.03, metrics=metrics)
     df = df[df.omega_rad_s.isin([-20, -10, 0, 10, 20])].reset_index(drop=True)   # 25 points
-    params = {**fit_params, "hidden_units": 50, "mlp_members": 2,
+    params = {**fit_params, "hidden_units": 50, "mlp_members": 2, "cv_loo": True,
               "cv_repeats": 2, "cv_folds": 5, "gp_restarts": 0, "tree_count": 50}
     return df, params, cross_validate_models(df, params)
 
@@ -270,6 +271,84 @@ def test_trees_win_only_by_more_than_the_standard_error():
                         ["mlp", "gp", "trees"])[0] == "trees"
     text = model_choice_markdown(noisy.assign(symbol="x", R=0.9, MAPE_pct=1.0, n_splits=15, fit_s=1.0), "mlp")
     assert "+- 0.0100" in text and "tied with it: mlp 0.9197" in text and "first listed smooth model, **mlp**" in text
+
+
+def test_leave_one_point_out_only_where_the_kfold_leaves_a_tie():
+    """cv_loo: ties: no LOO when the best is clear of the rest by more than its standard error;
+    the tied candidates (config order) when two or more are within it; never an under-covering one."""
+    params = {"models": ["mlp", "gp", "trees"], "cv_loo": "ties", "confidence": 0.9, "coverage_tolerance_pct": 5}
+    clear = _scored({"mlp": 0.90, "gp": 0.93, "trees": 0.85}, se=0.01)          # gp by 0.03 > 0.01
+    assert loo_candidates(clear, params) == []
+    tie = _scored({"trees": 0.92, "mlp": 0.915, "gp": 0.90}, se=0.01)           # mlp within, gp not
+    assert loo_candidates(tie, params) == ["mlp", "trees"]
+    assert loo_candidates(_scored({"mlp": 0.9, "gp": 0.9, "trees": 0.9}, se=0.01), params) == ["mlp", "gp", "trees"]
+    low = tie.assign(symbol="x", coverage_pct=np.where(tie["model"] == "mlp", 70.0, 90.0))   # mlp under-covers
+    assert loo_candidates(low, params) == []
+    assert loo_candidates(clear, {**params, "cv_loo": True}) == ["mlp", "gp", "trees"]
+    assert loo_candidates(tie, {**params, "cv_loo": False}) == []
+    with pytest.raises(ValueError, match="cv_loo"):
+        loo_candidates(tie, {**params, "cv_loo": "sometimes"})
+
+
+def _plane(U, omega):
+    """Metrics linear in the speeds: the GP fits them exactly, the trees do not."""
+    U, omega = np.asarray(U, float), np.asarray(omega, float)
+    return {"mass_g": 0.01 + 1e-4 * U + 2e-4 * omega, "throughput_mm2_s": 1 + 0.1 * U - 0.05 * omega,
+            "roughness_um": 50 + 0.2 * U + 0.5 * omega, "porosity_pct": 40 + 0.1 * U + 0.3 * omega}
+
+
+def _step(U, omega):
+    """Metrics that jump where omega turns negative: the trees as good as the GP."""
+    U, omega = np.asarray(U, float), np.asarray(omega, float)
+    jump = (omega < 0).astype(float)
+    return {"mass_g": 0.01 + 0.01 * jump + 1e-5 * U, "throughput_mm2_s": 1 + jump + 1e-3 * U,
+            "roughness_um": 50 + 20 * jump, "porosity_pct": 40 + 10 * jump}
+
+
+def test_cross_validation_runs_leave_one_point_out_for_the_tied_candidates_only(fit_params):
+    quick = {**fit_params, "models": ["gp", "trees"], "cv_repeats": 1, "gp_restarts": 0, "tree_count": 20,
+             "cv_loo": "ties"}
+    # the GP fits a plane exactly: the k-fold decides alone, no leave-one-point-out, and the table says so
+    clear = cross_validate_models(synthetic_dataset(0, metrics=_plane), quick)
+    assert set(clear["scheme"]) == {"kfold"} and choose_model(clear, quick["models"], 85)[0] == "gp"
+    text = model_choice_markdown(clear, "gp", confidence=0.9, min_coverage=85, cv_loo="ties")
+    assert "Leave-one-point-out skipped" in text and "margin of gp" in text
+    # a step both model about as well (0.683 against 0.677, margin 0.050): both tied, both left out point
+    # by point, with the scores every-candidate leave-one-point-out gives them
+    df = synthetic_dataset(0, noise=0.1, metrics=_step)
+    tied, predictions = cross_validate_models(df, quick, return_predictions=True)
+    every = cross_validate_models(df, {**quick, "cv_loo": True}).drop(columns="fit_s")
+    assert list(zip(tied["model"], tied["scheme"]))[::4] == [("gp", "kfold"), ("gp", "loo"),
+                                                             ("trees", "kfold"), ("trees", "loo")]
+    pd.testing.assert_frame_equal(tied.drop(columns="fit_s"), every)
+    assert (tied.loc[tied.scheme == "loo", "n_splits"] == 45).all()
+    assert len(predictions) == 2 * (45 + 45)
+    text = model_choice_markdown(tied, "gp", confidence=0.9, min_coverage=85, cv_loo="ties")
+    assert "only for the candidates tied within the margin (gp, trees" in text
+
+
+def test_trees_predict_what_their_trees_predict(noisy):
+    """TreeEnsemble.predict skips each tree's input checks: the mean and spread of the trees'
+    own predict(), exactly, for several targets and for one."""
+    X, Y = inputs_of(noisy), targets_of(noisy)
+    grid = np.c_[np.linspace(40, 100, 7), np.linspace(-20, 20, 7)]
+    for y in (Y, Y[:, 2]):
+        model = TreeEnsemble(n_trees=25).fit(X, y)
+        trees = np.stack([t.predict(grid) for t in model.forest_.estimators_]).reshape(25, len(grid), -1)
+        mean, std = model.predict(grid, return_std=True)
+        np.testing.assert_array_equal(mean, model._shaped(trees.mean(axis=0) * model.y_scale_ + model.y_mean_))
+        np.testing.assert_array_equal(std, model._shaped(trees.std(axis=0) * model.y_scale_))
+        assert mean.shape == ((7, 4) if y.ndim == 2 else (7,))
+
+
+def test_ensemble_members_fitted_in_parallel_are_the_same(noisy, fit_params):
+    params = {**fit_params, "hidden_units": 20, "n_init": 1}
+    X, Y = inputs_of(noisy), targets_of(noisy)
+    serial = MLPEnsemble(params, n_members=3).fit(X, Y)
+    parallel = MLPEnsemble(params, n_members=3, n_jobs=2).fit(X, Y)
+    for a, b in zip(serial.predict(X, return_std=True), parallel.predict(X, return_std=True)):
+        np.testing.assert_array_equal(a, b)
+    assert serial.predict(X, return_std=True)[1].min() > 0          # three different networks
 
 
 def test_fold_scores_average_to_the_pooled_r2():

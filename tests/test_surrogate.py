@@ -14,8 +14,9 @@ from sklearn.exceptions import ConvergenceWarning
 
 from analysis.columns import METRICS
 from analysis.surrogate.candidates import GPSurrogate
-from analysis.surrogate.data import inputs_of, read_split, split_runs, split_table
-from analysis.surrogate.network import deviation_from_paper, fit_surrogate
+from analysis.surrogate.data import inputs_of, point_folds, read_split, split_runs, split_table, targets_of
+from analysis.surrogate.network import deviation_from_paper, fit_surrogate, make_surrogate
+from analysis.surrogate.network import test_r_spread as r_spread  # not a test of pytest's
 from analysis.surrogate.persistence import load_surrogate, save_surrogate
 from analysis.surrogate.predict import hybrid_indices, predict_grid
 from analysis.surrogate.scores import R_TARGET, regression_scores
@@ -95,6 +96,30 @@ def test_scores_values_recomputed_by_hand_and_json(fitted, dataset):
     assert scores["cv_settings"]["folds"] == 5
     assert scores["params"]["n_init"] == 3
     json.dumps(scores, allow_nan=False)          # strictly valid JSON
+
+
+def test_fits_at_once_are_the_fits_one_at_a_time(fit_params):
+    """fit_surrogate's split and fold fits in 2 processes: the same scores, and the out-of-fold scores
+    those of scikit-learn's cross_val_predict over the same folds; test_r_spread takes the split whose
+    scores it is given (fit_surrogate's own: the same fit) instead of refitting it."""
+    from sklearn.model_selection import cross_val_predict
+
+    data = synthetic_dataset(2, noise=0.05)
+    params = {**fit_params, "hidden_units": 20, "n_init": 2}
+    _, one = fit_surrogate(data, params)
+    _, two = fit_surrogate(data, params, n_jobs=2)
+    for part in ("train", "test", "cv"):
+        assert one[part] == two[part], part
+    X, Y = inputs_of(data), targets_of(data)
+    reference = cross_val_predict(make_surrogate(params), X, Y, cv=point_folds(data, params["cv_folds"], 0))
+    by_sklearn = regression_scores(Y, reference)      # the same predictions, summed in another memory order
+    for m in METRICS:
+        assert two["cv"][m] == pytest.approx(by_sklearn[m], rel=1e-12), m
+    refitted = r_spread(data, params, 3, n_jobs=2)
+    reused = r_spread(data, params, 3, known={0: one["test"]})
+    assert refitted == reused and refitted["mass_g"]["R"][0] == one["test"]["mass_g"]["R"]
+    made_up = {m: {**one["test"][m], "R": 0.5} for m in METRICS}
+    assert r_spread(data, params, 3, known={0: made_up})["mass_g"]["R"] == [0.5, *refitted["mass_g"]["R"][1:]]
 
 
 def test_papers_literal_adam_setting_does_not_converge(dataset, fit_params):

@@ -3,6 +3,7 @@ metrics, extras, cost and health), refusing any run whose health is unsound."""
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -206,9 +207,41 @@ def point_means(df, split=None):
 def workflow_summary(dataset, wall_s: float) -> str:
     """One line on what a workflow's spreads cost: runs, LIGGGHTS' CPU time, the particle-steps
     per CPU second over every particle integrated (``particle_steps``), and the workflow's wall
-    time ``wall_s`` [s]. ``dataset`` is a ``dataset.csv`` path or its table."""
+    time ``wall_s`` [s]. ``dataset`` is a ``dataset.csv`` path or its table.
+
+    The rate is taken over the runs that have both ``particle_steps`` and ``cpu_s``; without
+    them it reads n/a.
+    """
     df = pd.read_csv(dataset) if isinstance(dataset, (str, Path)) else dataset
-    cpu = float(df["cpu_s"].sum())
-    rate = float(df["particle_steps"].sum()) / cpu if "particle_steps" in df and cpu > 0 else float("nan")
+    cpu_s = pd.to_numeric(df["cpu_s"], errors="coerce")
+    cpu = float(cpu_s.sum())
+    steps = pd.to_numeric(df["particle_steps"], errors="coerce") if "particle_steps" in df else None
+    both = (steps.notna() & cpu_s.notna() & (cpu_s > 0)) if steps is not None else None
+    rate = (float(steps[both].sum()) / float(cpu_s[both].sum()) if both is not None and both.any()
+            else float("nan"))
     return (f"spreadmap: {len(df)} runs, LIGGGHTS CPU {cpu / 60:.1f} min ({cpu / max(len(df), 1):.0f} s a run), "
-            f"{rate / 1e6:.2f} M particle-steps per CPU second, workflow wall time {wall_s / 60:.1f} min")
+            + (f"{rate / 1e6:.2f} M" if np.isfinite(rate) else "n/a")
+            + f" particle-steps per CPU second, workflow wall time {wall_s / 60:.1f} min")
+
+
+def workflow_summary_line(dataset, started: float, now: float | None = None) -> str:
+    """The workflow's last line (the Snakefile's ``onsuccess``), never an exception.
+
+    ``dataset``: the level's ``dataset.csv``; ``started``, ``now``: epoch seconds of the
+    workflow's start and end (``now`` defaults to the clock). :func:`workflow_summary` when the
+    dataset reads; when this invocation did not write it (older than ``started``: a target short
+    of it, or everything up to date), the line says so; without a readable dataset, a short line
+    with the wall time and why.
+    """
+    now = time.time() if now is None else now
+    wall = f"workflow wall time {(now - started) / 60:.1f} min"
+    path = Path(dataset)
+    try:
+        if not path.is_file():
+            return f"spreadmap: {wall} (no {path}: these targets do not make the dataset)"
+        line = workflow_summary(path, now - started)
+        if path.stat().st_mtime < started:
+            line += f" ({path.name} not remade by this invocation)"
+        return line
+    except Exception as err:   # noqa: BLE001 (a summary line must never fail the finished workflow)
+        return f"spreadmap: {wall} ({path} unreadable for the summary: {type(err).__name__}: {err})"

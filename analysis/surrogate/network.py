@@ -44,7 +44,6 @@ from joblib import Parallel, delayed
 from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.compose import TransformedTargetRegressor
 from sklearn.exceptions import ConvergenceWarning
-from sklearn.model_selection import cross_val_predict
 from sklearn.neural_network import MLPRegressor
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
@@ -234,7 +233,16 @@ def convergence_messages():
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
-def fit_surrogate(df, params):
+def _fit_on(params, X, Y, rows):
+    """The network of ``params`` fitted on ``rows`` of (X, Y): (model, its ConvergenceWarning
+    messages, fit seconds)."""
+    t0 = time.perf_counter()
+    with convergence_messages() as messages:
+        model = make_surrogate(params).fit(X[rows], Y[rows])
+    return model, messages, time.perf_counter() - t0
+
+
+def fit_surrogate(df, params, n_jobs=1):
     """Fit the surrogate on a seeded split of the runs and score it.
 
     Parameters
@@ -261,6 +269,8 @@ def fit_surrogate(df, params):
         ``KFold(cv_folds)`` over the (U, omega) points, :func:`point_folds`), ``cv_settings``, ``mape_note`` and
         ``warnings`` (metrics whose training R is below :data:`R_TARGET`,
         i.e. the network under-fits: lower ``alpha``).
+    n_jobs : int
+        Fits at once (joblib processes): the split's and the folds'; the results do not depend on it.
 
     Warns
     -----
@@ -271,17 +281,17 @@ def fit_surrogate(df, params):
     X, Y = inputs_of(df), targets_of(df)
     train, test = split_runs(df, params["n_test"], params["split_seed"])
 
-    model = make_surrogate(params)
-    t0 = time.perf_counter()
-    with convergence_messages() as messages:
-        model.fit(X[train], Y[train])
-    fit_time = time.perf_counter() - t0
+    folds = point_folds(df, params["cv_folds"], params["split_seed"])
+    fits = Parallel(n_jobs=n_jobs)(delayed(_fit_on)(params, X, Y, rows)
+                                   for rows in [train, *(fold_train for fold_train, _ in folds)])
+    model, messages, fit_time = fits[0]
     for msg in messages:
         warnings.warn(f"surrogate fit did not converge: {msg}", ConvergenceWarning, stacklevel=2)
-
-    folds = point_folds(df, params["cv_folds"], params["split_seed"])
-    with convergence_messages() as cv_messages:
-        Y_cv = cross_val_predict(make_surrogate(params), X, Y, cv=folds)
+    Y_cv = np.full_like(Y, np.nan)            # the folds' held-out predictions (cross_val_predict's)
+    cv_messages = []
+    for (_, test_rows), (fold_model, fold_messages, _) in zip(folds, fits[1:]):
+        Y_cv[test_rows] = fold_model.predict(X[test_rows])
+        cv_messages += fold_messages
 
     scores = {
         "sklearn_version": sklearn.__version__,
@@ -329,11 +339,13 @@ def _split_test_scores(df, params, seed):
     return regression_scores(Y[test], model.predict(X[test]))
 
 
-def test_r_spread(df, params, n_splits=20, n_jobs=1):
+def test_r_spread(df, params, n_splits=20, n_jobs=1, known=None):
     """The paper's network's test R over ``n_splits`` seeded paper-style splits: how much one split moves it.
 
     Split k holds out ``n_test`` points chosen with seed ``split_seed + k`` (split 0 is the
-    split of :func:`fit_surrogate`); the network is refitted on each split's training points.
+    split of :func:`fit_surrogate`); the network is refitted on each split's training points,
+    except for the seeds in ``known`` (seed -> that split's test scores, e.g. :func:`fit_surrogate`'s
+    ``scores["test"]`` for ``split_seed``: the same fit), whose scores are taken as they are.
 
     Returns
     -------
@@ -343,7 +355,9 @@ def test_r_spread(df, params, n_splits=20, n_jobs=1):
     """
     check_dataset(df)
     seeds = [int(params["split_seed"]) + k for k in range(int(n_splits))]
-    scores = Parallel(n_jobs=n_jobs)(delayed(_split_test_scores)(df, params, s) for s in seeds)
+    known = dict(known or {})
+    fitted = iter(Parallel(n_jobs=n_jobs)(delayed(_split_test_scores)(df, params, s) for s in seeds if s not in known))
+    scores = [known[s] if s in known else next(fitted) for s in seeds]
     out = {"n_splits": len(seeds), "seeds": seeds, "n_test": int(params["n_test"]),
            "by": "(U, omega) point, as the paper's 35/10 split"}
     for m in scores[0]:

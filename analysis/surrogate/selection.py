@@ -28,10 +28,13 @@ tie goes to the first listed smooth model (:data:`SMOOTH`: the paper's network,
 then the GP, in ``surrogate.models`` order); the trees, whose surfaces are
 piecewise flat, are chosen only when better by more than that margin.
 
-The leave-one-point-out fits of the network are warm-started
+Leave-one-point-out only reports, the choice is the k-fold's: with ``cv_loo: ties``
+(:func:`loo_candidates`) it is run for the candidates tied within the margin when
+there are two or more, and skipped when the k-fold scores decide alone.  The
+network's leave-one-point-out fits are warm-started
 (:func:`analysis.surrogate.candidates.refit_warm`) from the first k-fold
 repeat's fold model that held the same point out, so no fit starts from
-weights that saw its held-out point; they only report, the choice is the k-fold's.
+weights that saw its held-out point.
 
 Every model takes X = (U [mm/s], omega [rad/s]) of shape (n, 2) and returns
 the four metrics of :data:`analysis.surrogate.data.METRICS` in their units;
@@ -65,6 +68,10 @@ from analysis.surrogate.scores import json_number, regression_scores
 
 #: Candidates whose surfaces are smooth, in the order a tie prefers them (config order decides among them).
 SMOOTH = ("mlp", "gp")
+
+#: ``surrogate.cv_loo`` value: leave-one-point-out only for the candidates the k-fold scores leave tied
+#: (:func:`loo_candidates`).
+LOO_TIES = "ties"
 
 
 def _fold(name, p, X, Y, train, test, start=None, keep=False):
@@ -157,16 +164,49 @@ def interval_scores(Y, preds, stds, repeats, rho, confidence):
             "std_coverage_pct": 100 * raw.mean(axis=(0, 1))}
 
 
+def loo_setting(value):
+    """``surrogate.cv_loo`` checked: ``True`` (every candidate), ``False`` (none) or :data:`LOO_TIES`."""
+    if value is True or value is False or value == LOO_TIES:
+        return value
+    raise ValueError(f"surrogate.cv_loo must be true, false or {LOO_TIES!r}, not {value!r}")
+
+
+def loo_candidates(kfold_table, params):
+    """The candidates to score by leave-one-point-out, given the k-fold table and ``surrogate.cv_loo``.
+
+    ``True``: every candidate; ``False``: none; :data:`LOO_TIES`: the candidates the k-fold
+    scores cannot separate, i.e. those tied with the best within its standard error
+    (:func:`decide`'s ``tied``), when there are at least two; none when the best is clear of
+    every other eligible candidate by more than the margin: the k-fold scores then decide
+    alone.  Leave-one-point-out never changes the choice; in a tie it is a second look, with
+    the lower variance of fits on all points but one, at what the tie-break (the first smooth
+    model) gives up against the best score.
+    """
+    setting = loo_setting(params["cv_loo"])
+    models = list(params["models"])
+    if setting != LOO_TIES:
+        return models if setting else []
+    least = min_coverage_pct(params) if "coverage_tolerance_pct" in params else None
+    tied = decide(kfold_table, models, least)["tied"]
+    return [m for m in models if m in tied] if len(tied) > 1 else []
+
+
 def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=False, warm_loo=True):
     """Score every candidate of ``params["models"]`` by grouped cross-validation.
 
     Schemes: ``kfold``: ``cv_folds``-fold over the (U, omega) points, repeated
     ``cv_repeats`` times with shuffle seeds ``split_seed + r``; each repeat's
     pooled out-of-fold predictions are scored (:func:`regression_scores`) and
-    the scores averaged over repeats (``*_sd``: their spread).  ``loo``
-    (when ``cv_loo``): leave one (U, omega) point out, all its replicates
-    together, pooled.  Each scheme also scores the candidate's intervals at
+    the scores averaged over repeats (``*_sd``: their spread).  ``loo``, for the
+    candidates of :func:`loo_candidates` (``cv_loo``: ``true`` every one, ``ties`` those
+    the k-fold scores leave tied, ``false`` none): leave one (U, omega) point out, all its
+    replicates together, pooled.  Each scheme also scores the candidate's intervals at
     ``confidence`` (:func:`interval_scores`): calibrated, cross-fitted, and its own std.
+
+    The folds are fitted in two batches of ``n_jobs`` processes: every k-fold fit (and, with
+    ``cv_loo: true``, the leave-one-point-out fits that start from nothing), then the
+    leave-one-point-out fits that depend on them (the tied candidates', the network's
+    warm-started ones).
 
     Parameters
     ----------
@@ -174,7 +214,8 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
         The runs (speeds and metrics, finite).
     params : dict
         The ``surrogate:`` section (``models``, ``cv_folds``, ``cv_repeats``,
-        ``cv_loo``, ``split_seed``, ``confidence`` and the models' own keys).
+        ``cv_loo``, ``split_seed``, ``confidence`` and the models' own keys;
+        ``coverage_tolerance_pct`` for the tie of ``cv_loo: ties``).
     log : callable, optional
         Called with a progress line per model and scheme.
     n_jobs : int
@@ -189,7 +230,8 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
     Returns
     -------
     table : pandas.DataFrame
-        One row per (model, scheme, metric): ``model``, ``scheme``,
+        One row per (model, scheme, metric), each model's k-fold rows before its
+        leave-one-point-out rows: ``model``, ``scheme``,
         ``metric``, ``symbol``, ``R``, ``R2``, ``MAPE_pct``, ``R_sd``,
         ``R2_sd``, ``MAPE_pct_sd``, the columns of :func:`interval_scores`,
         ``mean_R2_se`` (the standard error of the model's mean R^2 over the metrics: the
@@ -204,73 +246,96 @@ def cross_validate_models(df, params, log=None, n_jobs=1, return_predictions=Fal
     """
     p = params
     check_dataset(df)
+    setting = loo_setting(p["cv_loo"])
     X, Y = inputs_of(df), targets_of(df)
     confidence = check_confidence(p["confidence"])
     rho, _ = relative_noise(df, random_state=int(p["random_state"]))
     n_points = int(point_groups(df).max()) + 1
-    schemes = [("kfold", [point_folds(df, p["cv_folds"], int(p["split_seed"]) + r)
-                          for r in range(int(p["cv_repeats"]))])]
-    if p["cv_loo"]:
-        schemes.append(("loo", [point_folds(df, n_points, 0)]))
-    tasks = [(name, scheme, r, train, test) for name in p["models"] for scheme, repeats in schemes
-             for r, splits in enumerate(repeats) for train, test in splits]
-    warm = [warm_loo and t[0] == "mlp" and t[1] == "loo" for t in tasks]     # started from the k-fold's models
-    keep = [warm_loo and t[0] == "mlp" and t[1] == "kfold" and t[2] == 0 for t in tasks]
-    fresh = Parallel(n_jobs=n_jobs)(delayed(_fold)(name, p, X, Y, train, test, keep=k)
-                                    for (name, _, _, train, test), w, k in zip(tasks, warm, keep) if not w)
-    fresh = iter(fresh)
-    folds = [None if w else next(fresh) for w in warm]
-    start = {}                      # point row -> the repeat-0 k-fold network that held it out
-    for fold in folds:
-        if fold is not None and fold[-1] is not None:
-            start.update(dict.fromkeys(fold[0].tolist(), fold[-1]))
-    later = Parallel(n_jobs=n_jobs)(delayed(_fold)(name, p, X, Y, train, test, start=start[int(test[0])])
-                                    for (name, _, _, train, test), w in zip(tasks, warm) if w)
-    later = iter(later)
-    folds = [next(later) if w else f for w, f in zip(warm, folds)]
-    rows, held_out = [], []
-    for name in p["models"]:
-        for scheme, repeats in schemes:
-            preds = {r: np.full_like(Y, np.nan) for r in range(len(repeats))}
-            stds = {r: np.full_like(Y, np.nan) for r in range(len(repeats))}
-            warned, elapsed = 0, 0.0
-            for (n, sc, r, _, _), (test, fold_pred, fold_std, n_warn, fit_s, _) in zip(tasks, folds):
-                if (n, sc) == (name, scheme):
-                    preds[r][test] = fold_pred
-                    stds[r][test] = fold_std
-                    warned += n_warn
-                    elapsed += fit_s
-            scores = [regression_scores(Y, pred) for pred in preds.values()]
-            per_fold = np.concatenate([fold_scores(Y, preds[r], splits) for r, splits in enumerate(repeats)])
-            se = float(per_fold.std(ddof=1) / np.sqrt(len(repeats[0]))) if len(per_fold) > 1 else 0.0
-            covered = interval_scores(Y, list(preds.values()), list(stds.values()), repeats, rho, confidence)
-            for j, (m, (symbol, _)) in enumerate(METRICS.items()):
-                values = {k: np.array([np.nan if s[m][k] is None else s[m][k] for s in scores])
-                          for k in ("R", "R2", "MAPE_pct")}
-                rows.append({"model": name, "scheme": scheme, "metric": m, "symbol": symbol,
-                             **{k: float(np.mean(v)) for k, v in values.items()},
-                             **{f"{k}_sd": float(np.std(v)) for k, v in values.items()},
-                             **{k: float(v[j]) for k, v in covered.items()},
-                             "mean_R2_se": se, "n_splits": sum(len(s) for s in repeats),
-                             "fit_s": round(elapsed, 2), "convergence_warnings": warned})
-            for r in preds:
-                frame = pd.DataFrame(np.c_[preds[r], stds[r]],
-                                     columns=[*METRICS, *(f"{m}_std" for m in METRICS)])
-                frame.insert(0, "row", np.arange(len(df)))
-                frame.insert(0, "repeat", r)
-                frame.insert(0, "scheme", scheme)
-                frame.insert(0, "model", name)
-                for j, c in enumerate(input_columns(df)):
-                    frame.insert(4 + j, c, X[:, j])
-                held_out.append(frame)
-            if log:
-                block = rows[-len(METRICS):]
-                log(f"{name:>5} {scheme:>5}: mean R^2 {np.mean([b['R2'] for b in block]):.3f}, "
-                    f"{100 * confidence:g} % interval covers {np.mean([b['coverage_pct'] for b in block]):.1f} % "
-                    f"({sum(len(s) for s in repeats)} fits, {elapsed:.1f} s)")
-    table = pd.DataFrame(rows)
+    models = list(p["models"])
+    schemes = {"kfold": [point_folds(df, p["cv_folds"], int(p["split_seed"]) + r)
+                         for r in range(int(p["cv_repeats"]))]}
+    if setting is not False:
+        schemes["loo"] = [point_folds(df, n_points, 0)]
+    warm = warm_loo and setting is not False and "mlp" in models   # the network's LOO from its k-fold models
+
+    def tasks(name, scheme):
+        return [(name, scheme, r, i, train, test) for r, splits in enumerate(schemes[scheme])
+                for i, (train, test) in enumerate(splits)]
+
+    fits, start = {}, {}            # start: point row -> the repeat-0 k-fold network that held it out
+
+    def fit_all(batch):
+        done = Parallel(n_jobs=n_jobs)(
+            delayed(_fold)(name, p, X, Y, train, test,
+                           start=start[int(test[0])] if warm and name == "mlp" and scheme == "loo" else None,
+                           keep=warm and name == "mlp" and scheme == "kfold" and r == 0)
+            for name, scheme, r, _, train, test in batch)
+        fits.update(zip([t[:4] for t in batch], done))
+        for fold in done:
+            if fold[-1] is not None:
+                start.update(dict.fromkeys(fold[0].tolist(), fold[-1]))
+
+    rows, held_out = {}, {}
+
+    def score(name, scheme):
+        repeats = schemes[scheme]
+        preds = {r: np.full_like(Y, np.nan) for r in range(len(repeats))}
+        stds = {r: np.full_like(Y, np.nan) for r in range(len(repeats))}
+        warned, elapsed = 0, 0.0
+        for t in tasks(name, scheme):
+            test, fold_pred, fold_std, n_warn, fit_s, _ = fits[t[:4]]
+            preds[t[2]][test] = fold_pred
+            stds[t[2]][test] = fold_std
+            warned += n_warn
+            elapsed += fit_s
+        scores = [regression_scores(Y, pred) for pred in preds.values()]
+        per_fold = np.concatenate([fold_scores(Y, preds[r], splits) for r, splits in enumerate(repeats)])
+        se = float(per_fold.std(ddof=1) / np.sqrt(len(repeats[0]))) if len(per_fold) > 1 else 0.0
+        covered = interval_scores(Y, list(preds.values()), list(stds.values()), repeats, rho, confidence)
+        block = []
+        for j, (m, (symbol, _)) in enumerate(METRICS.items()):
+            values = {k: np.array([np.nan if s[m][k] is None else s[m][k] for s in scores])
+                      for k in ("R", "R2", "MAPE_pct")}
+            block.append({"model": name, "scheme": scheme, "metric": m, "symbol": symbol,
+                          **{k: float(np.mean(v)) for k, v in values.items()},
+                          **{f"{k}_sd": float(np.std(v)) for k, v in values.items()},
+                          **{k: float(v[j]) for k, v in covered.items()},
+                          "mean_R2_se": se, "n_splits": sum(len(s) for s in repeats),
+                          "fit_s": round(elapsed, 2), "convergence_warnings": warned})
+        rows[name, scheme] = block
+        frames = []
+        for r in preds:
+            frame = pd.DataFrame(np.c_[preds[r], stds[r]], columns=[*METRICS, *(f"{m}_std" for m in METRICS)])
+            frame.insert(0, "row", np.arange(len(df)))
+            frame.insert(0, "repeat", r)
+            frame.insert(0, "scheme", scheme)
+            frame.insert(0, "model", name)
+            for j, c in enumerate(input_columns(df)):
+                frame.insert(4 + j, c, X[:, j])
+            frames.append(frame)
+        held_out[name, scheme] = frames
+        if log:
+            log(f"{name:>5} {scheme:>5}: mean R^2 {np.mean([b['R2'] for b in block]):.3f}, "
+                f"{100 * confidence:g} % interval covers {np.mean([b['coverage_pct'] for b in block]):.1f} % "
+                f"({sum(len(s) for s in repeats)} fits, {elapsed:.1f} s)")
+
+    # every k-fold fit first, with the leave-one-point-out fits known to be wanted that start from nothing
+    first = [t for name in models for t in tasks(name, "kfold")]
+    if setting is True:
+        first += [t for name in models if not (warm and name == "mlp") for t in tasks(name, "loo")]
+    fit_all(first)
+    for name in models:
+        score(name, "kfold")
+    loo = loo_candidates(pd.DataFrame([r for name in models for r in rows[name, "kfold"]]), p)
+    fit_all([t for name in loo for t in tasks(name, "loo") if t[:4] not in fits])
+    for name in loo:
+        score(name, "loo")
+    if log and setting == LOO_TIES and not loo:
+        log("  leave-one-point-out skipped: the k-fold scores decide alone (no other candidate within the margin)")
+    keys = [(name, scheme) for name in models for scheme in ("kfold", "loo") if (name, scheme) in rows]
+    table = pd.DataFrame([r for k in keys for r in rows[k]])
     if return_predictions:
-        return table, pd.concat(held_out, ignore_index=True)
+        return table, pd.concat([f for k in keys for f in held_out[k]], ignore_index=True)
     return table
 
 
@@ -364,12 +429,32 @@ def choice_rule_text(d):
     return text + f"**{best}** is chosen"
 
 
-def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=None, min_coverage=None):
+def loo_text(table, d, setting):
+    """One sentence: which candidates have leave-one-point-out scores and why (``setting``:
+    ``surrogate.cv_loo``; ``d``: :func:`decide` on ``table``)."""
+    setting = loo_setting(setting)
+    done = [m for m in dict.fromkeys(table["model"]) if ((table["model"] == m) & (table["scheme"] == "loo")).any()]
+    if setting is False:
+        return "Leave-one-point-out: off (`surrogate.cv_loo: false`)."
+    if setting is True:
+        return ("Leave-one-point-out: every candidate (`surrogate.cv_loo: true`); it reports, the k-fold "
+                "scores decide.")
+    if done:
+        return (f"Leave-one-point-out only for the candidates tied within the margin ({', '.join(done)}; "
+                f"`surrogate.cv_loo: {LOO_TIES}`): a second look at the tie with fits on all points but one; "
+                "it reports, the k-fold scores decide.")
+    return (f"Leave-one-point-out skipped (`surrogate.cv_loo: {LOO_TIES}`): no other candidate is within the "
+            f"margin of {d['best']}, so the k-fold scores decide alone.")
+
+
+def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=None, min_coverage=None,
+                          cv_loo=None):
     """The cross-validation table as Markdown, the chosen model in bold, the noise ceiling beside it.
 
     ``ceiling`` is :func:`analysis.metrics.noise_floor.accuracy_ceiling` (or None);
     ``confidence`` the intervals' level and ``min_coverage`` (%) the choice's least
-    coverage (:func:`choose_model`), for the intervals' table and the flags.
+    coverage (:func:`choose_model`), for the intervals' table and the flags; ``cv_loo``
+    (``surrogate.cv_loo``, optional) for a sentence on the leave-one-point-out (:func:`loo_text`).
     """
     symbols = [s for s, _ in METRICS.values()]
     title = "# Surrogate model choice by cross-validation" + (f" ({level})" if level else "")
@@ -390,6 +475,8 @@ def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=No
     if "mean_R2_se" in table:
         d = decide(table, list(dict.fromkeys(table["model"])), min_coverage)
         lines += [f"Margin: {choice_rule_text(d)}.", ""]
+        if cv_loo is not None:
+            lines += [loo_text(table, d, cv_loo), ""]
 
     def joined(values, f):
         return " / ".join("n/a" if not np.isfinite(v) else format(v, f) for v in values)
@@ -449,13 +536,13 @@ def model_choice_markdown(table, chosen, ceiling=None, level=None, confidence=No
 
 
 def write_model_choice(table, chosen, csv_path, md_path, ceiling=None, level=None, confidence=None,
-                       min_coverage=None, predictions=None, predictions_path=None):
+                       min_coverage=None, predictions=None, predictions_path=None, cv_loo=None):
     """Write the cross-validation table as CSV (with a ``chosen`` column) and Markdown, atomically;
     with ``predictions`` also the held-out predictions as CSV (``predictions_path``)."""
     with atomic_path(csv_path) as tmp:
         table.assign(chosen=table["model"] == chosen).to_csv(tmp, index=False)
     with atomic_path(md_path) as tmp:
-        tmp.write_text(model_choice_markdown(table, chosen, ceiling, level, confidence, min_coverage))
+        tmp.write_text(model_choice_markdown(table, chosen, ceiling, level, confidence, min_coverage, cv_loo))
     if predictions is not None:
         with atomic_path(predictions_path) as tmp:
             predictions.to_csv(tmp, index=False)
@@ -470,8 +557,9 @@ def read_choice(csv_path):
     return str(chosen[0]), table
 
 
-def fit_chosen(df, params, name, train_idx=None):
-    """Fit candidate ``name`` on the runs ``train_idx`` (default all) of ``df``.
+def fit_chosen(df, params, name, train_idx=None, n_jobs=1):
+    """Fit candidate ``name`` on the runs ``train_idx`` (default all) of ``df``; ``n_jobs``: the
+    network ensemble's members fitted at once (the fit does not depend on it).
 
     Returns
     -------
@@ -484,6 +572,8 @@ def fit_chosen(df, params, name, train_idx=None):
     X, Y = inputs_of(df), targets_of(df)
     rows = np.arange(len(df)) if train_idx is None else np.asarray(train_idx, int)
     model = make_candidate(name, params)
+    if name == "mlp":
+        model.set_params(n_jobs=n_jobs)
     t0 = time.perf_counter()
     with convergence_messages() as messages:
         model.fit(X[rows], Y[rows])
@@ -497,14 +587,14 @@ def fit_chosen(df, params, name, train_idx=None):
     return model, info
 
 
-def fit_calibrated(df, params, name, train_idx, predictions):
-    """Candidate ``name`` fitted on the runs ``train_idx`` (:func:`fit_chosen`), its intervals calibrated
-    on its k-fold held-out predictions (``predictions``: cv_predictions.csv, every candidate's).
+def fit_calibrated(df, params, name, train_idx, predictions, n_jobs=1):
+    """Candidate ``name`` fitted on the runs ``train_idx`` (:func:`fit_chosen`, ``n_jobs``), its intervals
+    calibrated on its k-fold held-out predictions (``predictions``: cv_predictions.csv, every candidate's).
 
     Returns (the :class:`analysis.surrogate.intervals.CalibratedSurrogate`, :func:`fit_chosen`'s info,
     the noise's source as text).
     """
-    model, info = fit_chosen(df, params, name, train_idx)
+    model, info = fit_chosen(df, params, name, train_idx, n_jobs)
     held_out = predictions[(predictions["model"] == name) & (predictions["scheme"] == "kfold")]
     rho, source = relative_noise(df, random_state=int(params["random_state"]))
     return calibrated_from_predictions(model, held_out, df, rho, params["confidence"], source), info, source
