@@ -35,11 +35,16 @@ def known(fit_params):
     return model, scores
 
 
+def saved(model_and_scores, tmp_path_factory, folder):
+    """The model saved with its scores as ``<folder>/model.joblib``, as the surrogate rule writes it."""
+    path = tmp_path_factory.mktemp(folder) / "model.joblib"
+    save_surrogate(model_and_scores[0], path, model_and_scores[1])
+    return path
+
+
 @pytest.fixture(scope="module")
 def model_file(known, tmp_path_factory):
-    path = tmp_path_factory.mktemp("surrogate") / "model.joblib"
-    save_surrogate(known[0], path, known[1])
-    return path
+    return saved(known, tmp_path_factory, "surrogate")
 
 
 def test_best_is_the_largest_U_within_the_porosity_limit(known):
@@ -135,9 +140,7 @@ def layered(known):
 
 @pytest.fixture(scope="module")
 def layered_file(layered, tmp_path_factory):
-    path = tmp_path_factory.mktemp("layered") / "model.joblib"
-    save_surrogate(layered[0], path, layered[1])
-    return path
+    return saved(layered, tmp_path_factory, "layered")
 
 
 def test_a_void_fraction_limit_caps_U(layered):
