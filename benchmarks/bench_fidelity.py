@@ -4,7 +4,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_fidelity.py [--level default] [--points 100:-10,100:0,100:10]
         [--seeds 2] [--variants reference,default,E1e6,...] [--jobs 2] [--name fidelity]
-        [--ladder default,E2e7,E5e7,E1e8] [--out benchmarks/measured]
+        [--ladder default,E2e7,E5e7,E1e8] [--out benchmarks/measured] [--keep DIR]
 
 Every variant is the config's fidelity level with a few keys overridden
 (``VARIANTS`` below). For each variant and seed (replicate: another heap
@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import copy
 import platform
+import shutil
 import sys
 import tempfile
 import time
@@ -116,7 +117,7 @@ def sampling_area_mm2(config: dict, level: str) -> float:
 
 def run_scene(task) -> list[dict]:
     """Geometry, settle (seed ``replicate``) and every point's spread of one variant."""
-    name, config, level, replicate, points = task
+    name, config, level, replicate, points, keep = task
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -138,6 +139,11 @@ def run_scene(task) -> list[dict]:
                              "cpu_s": children_cpu() - cpu0, "error": short_error(err)})
                 continue
             cpu = children_cpu() - cpu0
+            if keep is not None:  # the layer and its substrate, to re-measure over other regions
+                kept = keep / f"{name}_s{replicate}_U{U:g}_w{omega:g}"
+                kept.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(tmp / "run" / "final.dump", kept / "final.dump")
+                shutil.copy2(tmp / "meshes" / "substrate.stl", kept / "substrate.stl")
             rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
                          "wall_s": health["wall_s"], "cpu_s": cpu, "steps": health["steps"],
                          "particles": health["atoms"], "timestep_s": health["timestep_s"],
@@ -244,6 +250,9 @@ def main(argv=None) -> int:
                         help="variants from cheapest to finest (e.g. default,E2e7,E5e7,E1e8): each step judged in "
                              "the finer one's pooled seed sd (convergence)")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured", help="folder of the results")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="copy each run's final.dump and substrate.stl to DIR/<variant>_s<seed>_U<U>_w<omega>/ "
+                             "(benchmarks/bench_region.py re-measures them over other sampling regions)")
     parser.add_argument("--summarise", action="store_true",
                         help="no runs: rewrite <name>.md and .png from <name>.csv (same --variants, --reference)")
     args = parser.parse_args(argv)
@@ -254,7 +263,7 @@ def main(argv=None) -> int:
     if unknown or args.reference not in names:
         parser.error(f"unknown variant(s) {unknown} or reference {args.reference!r} not among --variants; "
                      f"known: {sorted(VARIANTS)}")
-    tasks = [(n, variant_config(base, args.level, VARIANTS[n]), args.level, seed, points)
+    tasks = [(n, variant_config(base, args.level, VARIANTS[n]), args.level, seed, points, args.keep)
              for n in names for seed in range(args.seeds)]
     started = time.perf_counter()
     out = args.out

@@ -1,10 +1,11 @@
 """benchmarks/bench_fidelity.py: the convergence judgement on hand-made runs, and a smoke run of
-the benchmark itself through real LIGGGHTS (the study: benchmarks/measured/stiffness.md)."""
+the benchmark itself through real LIGGGHTS (the study: benchmarks/measured/stiffness.md), whose kept
+layer is bench_region.py's smoke run."""
 import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks import bench_fidelity
+from benchmarks import bench_fidelity, bench_region
 from benchmarks.bench_fidelity import METRICS, convergence
 
 
@@ -46,11 +47,13 @@ def test_mass_is_compared_per_unit_sampling_area_and_failed_runs_are_left_out():
     assert step["M_s shift (finer sds)"] == pytest.approx(0.0, abs=1e-9) and step["converged"]
 
 
-def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_writes_its_tables(tmp_path):
-    """One smoke spread per variant and the ladder's table: the benchmark's own path, cheaply."""
+def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchmark_remeasures_its_layer(tmp_path):
+    """One smoke spread, the ladder's table, and the kept layer re-measured by bench_region.py over a
+    longer region: both benchmarks' own paths, on one LIGGGHTS run."""
+    kept = tmp_path / "kept"
     assert bench_fidelity.main(["--level", "smoke", "--points", "100:0", "--seeds", "1", "--jobs", "1",
                                 "--variants", "default", "--reference", "default", "--name", "smoke",
-                                "--out", str(tmp_path)]) == 0
+                                "--out", str(tmp_path), "--keep", str(kept)]) == 0
     runs = pd.read_csv(tmp_path / "smoke.csv")
     assert len(runs) == 1 and ("error" not in runs or runs["error"].isna().all())
     row = runs.iloc[0]
@@ -59,3 +62,14 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_writes_its_tables
     assert np.isfinite(row["inrun_max_overlap_fraction"]) and row["squeeze_outs_max"] >= 0
     table = (tmp_path / "smoke.md").read_text()
     assert "| default " in table and "0.0%" in table  # the reference against itself
+
+    assert (kept / "default_s0_U100_w0" / "final.dump").exists()
+    assert bench_region.main(["--replicates", str(kept), "--level", "smoke", "--starts", "3.5", "--jobs", "1",
+                              "--name", "region", "--out", str(tmp_path)]) == 0
+    measured = pd.read_csv(tmp_path / "region.csv").set_index("start_mm")
+    assert sorted(measured.index) == [3.5, 4.5]
+    assert measured.loc[3.5, "length_mm"] == pytest.approx(3.0) and measured.loc[4.5, "length_mm"] == pytest.approx(2.0)
+    for k in METRICS:  # over the level's own region: the fidelity benchmark's numbers exactly
+        assert measured.loc[4.5, k] == pytest.approx(row[k], rel=1e-9)
+    assert 0 < measured.loc[3.5, "mass_g"] < 1.4 * row["mass_g"]  # per the level's area, not 1.5x its mass
+    assert "3.50 |" in (tmp_path / "region.md").read_text()

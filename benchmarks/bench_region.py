@@ -1,0 +1,192 @@
+"""Noise against the sampling region's length: the same layers re-measured over longer regions.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_region.py --replicates DIR [--map results/default/runs]
+        [--starts 1,2,3,4,5,6] [--end-mm 9] [--variant default] [--name region_noise]
+        [--out benchmarks/measured]
+
+The run-in and run-out of a spread are a fixed cost per run, so a longer
+sampling region buys area, and lower noise, without more DEM. Whether that
+area is usable is a question of physics: the layer must be in steady state
+over it. This benchmark answers both from layers already simulated, with no
+new DEM:
+
+* ``--replicates``: runs kept by ``bench_fidelity.py --keep DIR`` (folders
+  ``<variant>_s<seed>_U<U>_w<omega>/`` holding ``final.dump`` and
+  ``substrate.stl``). Their seed-to-seed sd at each region gives the noise.
+* ``--map``: a map's run folders (``results/<level>/runs``); their spread
+  over the map's points at each region gives the signal, and each run's
+  shift from the level's own region is the region's bias.
+
+Each region ends at ``--end-mm`` and starts at each of ``--starts`` [mm]
+along the spreading direction (the level's region is one of them); its width
+is the level's. M_s is scaled to the level's own region area (mass per
+area), so that every region's numbers read in the same units; Q_s, R_q and
+Phi do not depend on the area.
+
+Writes ``<name>.csv`` (one row per layer and region) and ``<name>.md``: per
+region, the pooled seed sd of each metric (% of its mean), the noise
+ceiling R_max = sqrt(1 - sd^2 / var(map)) a surrogate of the map could reach,
+and the bias against the level's region in pooled seed sds of that region.
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import re
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from analysis.config.fidelity import scene
+from analysis.config.load import load_config
+from analysis.metrics.dump import read_dump
+from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units
+
+ROOT = Path(__file__).resolve().parent.parent
+METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
+KEPT = re.compile(r"(?P<variant>.+)_s(?P<seed>\d+)_U(?P<U>[-\d.]+)_w(?P<omega>[-\d.]+)$")
+MAP_RUN = re.compile(r"U(?P<U>[-\d.]+)_w(?P<omega>[-\d.]+)_r(?P<seed>\d+)$")
+
+
+def layers(replicates: Path | None, map_runs: Path | None, variant: str) -> list[dict]:
+    """The layers to measure: ``{source, seed, U_mm_s, omega_rad_s, dump, substrate}``."""
+    found = []
+    for folder in sorted(replicates.iterdir()) if replicates else []:
+        m = KEPT.match(folder.name)
+        if m and m["variant"] == variant and (folder / "final.dump").exists():
+            found.append({"source": "replicates", "seed": int(m["seed"]), "U_mm_s": float(m["U"]),
+                          "omega_rad_s": float(m["omega"]), "dump": folder / "final.dump",
+                          "substrate": folder / "substrate.stl"})
+    for folder in sorted(map_runs.iterdir()) if map_runs else []:
+        m = MAP_RUN.match(folder.name)
+        if m and (folder / "final.dump").exists():
+            meshes = map_runs.parent / "meshes" / f"r{m['seed']}"
+            found.append({"source": "map", "seed": int(m["seed"]), "U_mm_s": float(m["U"]),
+                          "omega_rad_s": float(m["omega"]), "dump": folder / "final.dump",
+                          "substrate": meshes / "substrate.stl"})
+    return found
+
+
+def measure(task) -> list[dict]:
+    """One layer's four metrics over every region (M_s scaled to ``area_ref`` [m^2])."""
+    layer, regions, area_ref, density, n_lines, seed = task
+    frame = read_dump(layer["dump"])
+    rows = []
+    for start_mm, region in regions:
+        report = to_report_units(spread_layer_metrics(
+            frame, region, layer["U_mm_s"] * 1e-3, density, substrate=layer["substrate"],
+            n_lines=n_lines, seed=seed))
+        area = (region[1] - region[0]) * (region[3] - region[2])
+        row = {k: v for k, v in layer.items() if k not in ("dump", "substrate")}
+        row.update({"start_mm": start_mm, "length_mm": (region[1] - region[0]) * 1e3,
+                    **{k: report[k] for k in METRICS}})
+        row["mass_g"] *= area_ref / area
+        rows.append(row)
+    return rows
+
+
+def summarise(runs: pd.DataFrame, own_start_mm: float) -> pd.DataFrame:
+    """Per region: pooled seed sd (replicates), the map's spread, R_max and the bias."""
+    rep = runs[runs["source"] == "replicates"]
+    mapped = runs[runs["source"] == "map"]
+    point = ["U_mm_s", "omega_rad_s"]
+    own_sd = {}
+    rows = []
+    for start in sorted(runs["start_mm"].unique()):
+        row = {"start_mm": start, "length_mm": runs.loc[runs["start_mm"] == start, "length_mm"].iloc[0]}
+        r = rep[rep["start_mm"] == start]
+        for k, name in METRICS.items():
+            dev = r[k] - r.groupby(point)[k].transform("mean")
+            dof = (r.groupby(point)[k].transform("size") - 1).groupby([r[c] for c in point]).first().sum()
+            sd = float(np.sqrt((dev**2).sum() / dof)) if dof > 0 else np.nan
+            row[f"{name}_sd_pct"] = 100 * sd / r[k].abs().mean() if len(r) else np.nan
+            if start == own_start_mm:
+                own_sd[k] = sd
+            row[f"_{k}_sd"] = sd
+            m = mapped[mapped["start_mm"] == start]
+            var_map = float(m[k].var(ddof=1)) if len(m) > 1 else np.nan
+            row[f"{name}_R_max"] = (float(np.sqrt(max(0.0, 1 - sd**2 / var_map)))
+                                    if var_map > 0 and np.isfinite(sd) else np.nan)
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    # bias: each map run's shift from its value over the level's region, in that region's seed sd; the
+    # worst omega's mean shift (over its U's: the layer's run-in depends on the roller's turning, not on U)
+    own = mapped[mapped["start_mm"] == own_start_mm].set_index(point + ["seed"])
+    for k, name in METRICS.items():
+        mean_bias, worst = [], []
+        for start in table["start_mm"]:
+            other = mapped[mapped["start_mm"] == start].set_index(point + ["seed"])
+            shift = (other[k] - own[k]).dropna() / own_sd.get(k, np.nan)
+            by_omega = shift.groupby(level="omega_rad_s").mean()
+            mean_bias.append(shift.mean() if len(shift) else np.nan)
+            worst.append(by_omega.abs().max() if len(by_omega) else np.nan)
+        table[f"{name}_bias_sd"] = mean_bias
+        table[f"{name}_worst_omega_sd"] = worst
+    return table.drop(columns=[c for c in table if c.startswith("_")])
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--replicates", type=Path, default=None, help="bench_fidelity.py --keep's folder")
+    parser.add_argument("--map", type=Path, default=None, help="a map's runs folder (results/<level>/runs)")
+    parser.add_argument("--level", default="default")
+    parser.add_argument("--variant", default="default", help="the kept variant whose replicates give the noise")
+    parser.add_argument("--starts", default="1,2,3,4,5,6", help="region starts [mm]")
+    parser.add_argument("--end-mm", type=float, default=None, help="region end [mm]; default the level's")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--name", default="region_noise")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
+    args = parser.parse_args(argv)
+    config = load_config(ROOT / "config.yaml")
+    s = scene(config, args.level)
+    x0, x1, y0, y1 = s.sampling_region
+    own_start = round(x0 * 1e3, 6)
+    end = args.end_mm * 1e-3 if args.end_mm is not None else x1
+    starts = sorted({float(v) for v in args.starts.split(",")} | {own_start})
+    if any(v * 1e-3 >= end for v in starts):
+        parser.error(f"--starts {args.starts!r} must all lie before the region's end {end * 1e3:g} mm")
+    regions = [(v, (v * 1e-3, end, y0, y1)) for v in starts]
+    found = layers(args.replicates, args.map, args.variant)
+    if not found:
+        parser.error(f"no layers found under --replicates {args.replicates} (variant {args.variant!r}) "
+                     f"or --map {args.map}")
+    started = time.perf_counter()
+    area_ref = (x1 - x0) * (y1 - y0)
+    tasks = [(layer, regions, area_ref, s.density, s.profilometer_lines, config["profilometer"]["seed"])
+             for layer in found]
+    rows = []
+    with ProcessPoolExecutor(args.jobs) as pool:
+        for i, done in enumerate(pool.map(measure, tasks), 1):
+            rows += done
+            print(f"{i}/{len(tasks)} layers measured", end="\r", flush=True)
+    runs = pd.DataFrame(rows)
+    args.out.mkdir(parents=True, exist_ok=True)
+    runs.to_csv(args.out / f"{args.name}.csv", index=False)
+    table = summarise(runs, own_start)
+    command = " ".join(argv if argv is not None else sys.argv[1:])
+    counts = runs[runs["start_mm"] == own_start].groupby("source").size().to_dict()
+    text = (f"# Noise against the sampling region's length ({args.level} level)\n\n"
+            f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, in "
+            f"{time.perf_counter() - started:.0f} s (no DEM: layers re-measured), by\n"
+            f"`.venv/bin/python benchmarks/bench_region.py {command}`.\n\n"
+            f"Layers: {counts.get('replicates', 0)} replicated runs (variant `{args.variant}`), "
+            f"{counts.get('map', 0)} map runs. Regions end at {end * 1e3:g} mm; the level's own starts at "
+            f"{own_start:g} mm. M_s per the level's region area.\n\n"
+            "- `<m>_sd_pct`: pooled seed sd over the replicated points, % of the mean;\n"
+            "- `<m>_R_max`: sqrt(1 - sd^2 / var over the map's runs), the best R a surrogate can reach;\n"
+            "- `<m>_bias_sd`: mean shift of a map run from its value over the level's region, in that "
+            "region's pooled seed sd; `<m>_worst_omega_sd`: the largest such mean shift of one omega's runs.\n\n"
+            + table.to_markdown(index=False, floatfmt=".2f") + "\n")
+    (args.out / f"{args.name}.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
