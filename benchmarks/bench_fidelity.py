@@ -74,6 +74,12 @@ VARIANTS = {
     # the stiffness ladder of the fed scene (docs/scene_size.md: Stiffness)
     "E5e7": {"material.youngs_modulus_dem_Pa": 5.0e7},
     "E1e8": {"material.youngs_modulus_dem_Pa": 1.0e8},
+    # the fed scene's size and supply at 20 MPa (docs/scene_size.md: At the converged stiffness)
+    "E2e7+strip2.5": {"material.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 2.5,
+                      "LEVEL.heap_particles": 3800},
+    "E2e7+pile40": {"material.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.feed_pile_mg_per_mm": 40,
+                    "LEVEL.heap_particles": 3640},
+    "E2e7+region6": {"material.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.sampling_length_mm": 6.0},
 }
 
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).
