@@ -4,7 +4,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_fidelity.py [--level default] [--points 100:-10,100:0,100:10]
         [--seeds 2] [--variants reference,default,E1e6,...] [--jobs 2] [--name fidelity]
-        [--ladder default,E2e7,E5e7,E1e8] [--out benchmarks/measured] [--keep DIR]
+        [--ladder default,E2e7,E5e7,E1e8[;E2e7,E2e7+pile40]] [--out benchmarks/measured] [--keep DIR]
 
 Every variant is the config's fidelity level with a few keys overridden
 (``VARIANTS`` below). For each variant and seed (replicate: another heap
@@ -254,7 +254,7 @@ def main(argv=None) -> int:
     parser.add_argument("--name", default="fidelity")
     parser.add_argument("--ladder", default="",
                         help="variants from cheapest to finest (e.g. default,E2e7,E5e7,E1e8): each step judged in "
-                             "the finer one's pooled seed sd (convergence)")
+                             "the finer one's pooled seed sd (convergence); several ladders separated by ';'")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured", help="folder of the results")
     parser.add_argument("--keep", type=Path, default=None,
                         help="copy each run's final.dump and substrate.stl to DIR/<variant>_s<seed>_U<U>_w<omega>/ "
@@ -274,8 +274,8 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    ladder = [n for n in args.ladder.split(",") if n]
-    if set(ladder) - set(names):
+    ladders = [[n for n in one.split(",") if n] for one in args.ladder.split(";")]
+    if set().union(*ladders) - set(names):
         parser.error(f"--ladder {args.ladder!r} names variants not among --variants {args.variants!r}")
     if args.summarise:
         runs = pd.read_csv(out / f"{args.name}.csv")
@@ -309,8 +309,8 @@ def main(argv=None) -> int:
             f"Error: mean over the points of |variant - reference| / mean |reference|, each the mean "
             f"over its seeds; M_s per unit sampling area (a wider strip has a wider region).\n\n"
             f"Variants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")
-    if len(ladder) > 1:
-        steps = convergence(runs, ladder)
+    if any(len(ladder) > 1 for ladder in ladders):
+        steps = pd.concat([convergence(runs, ladder) for ladder in ladders if len(ladder) > 1], ignore_index=True)
         text += ("\n## Convergence, one step at a time\n\nEach step's largest shift over the points, in "
                  "pooled seed sds of the finer scene, and its mean relative change; converged: every "
                  "metric within 1 sd.\n\n" + steps.to_markdown(index=False, floatfmt=".2f") + "\n")

@@ -73,3 +73,19 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
         assert measured.loc[4.5, k] == pytest.approx(row[k], rel=1e-9)
     assert 0 < measured.loc[3.5, "mass_g"] < 1.4 * row["mass_g"]  # per the level's area, not 1.5x its mass
     assert "3.50 |" in (tmp_path / "region.md").read_text()
+
+
+def test_two_ladders_from_one_base_are_each_judged_in_their_own_finer_scenes_sd(tmp_path):
+    """``--ladder 'a,b;a,c' --summarise``: a base against two references, one table, no simulation."""
+    base = {"mass_g": 1.0, "throughput_mm2_s": 20.0, "roughness_um": 80.0, "porosity_pct": 40.0}
+    sds = {k: 0.02 * v for k, v in base.items()}
+    runs = pd.DataFrame(runs_of("default", base, sds) + runs_of("E2e7", {**base, "mass_g": 1.04}, sds)
+                        + runs_of("E5e7", {**base, "mass_g": 1.01}, sds)).assign(cpu_s=1.0, wall_s=1.0, steps=10,
+                                                                                   particles=5)
+    runs.to_csv(tmp_path / "two.csv", index=False)
+    assert bench_fidelity.main(["--variants", "default,E2e7,E5e7", "--reference", "E2e7", "--name", "two",
+                                "--ladder", "default,E2e7;default,E5e7", "--summarise", "--out", str(tmp_path)]) == 0
+    table = (tmp_path / "two.md").read_text()
+    assert "| default -> E2e7 " in table and "| default -> E5e7 " in table
+    steps = convergence(runs, ["default", "E2e7"]), convergence(runs, ["default", "E5e7"])
+    assert not steps[0]["converged"].iloc[0] and steps[1]["converged"].iloc[0]  # 2 sds off, then 0.5
