@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/bench_region.py --replicates DIR [--map results/default/runs]
-        [--starts 1,2,3,4,5,6] [--end-mm 9] [--variant default] [--name region_noise]
+        [--regions 4-9,5-9,6-10.5,6-12] [--variant default] [--name region_noise]
         [--out benchmarks/measured]
 
 The run-in and run-out of a spread are a fixed cost per run, so a longer
@@ -19,9 +19,9 @@ new DEM:
   over the map's points at each region gives the signal, and each run's
   shift from the level's own region is the region's bias.
 
-Each region ends at ``--end-mm`` and starts at each of ``--starts`` [mm]
-along the spreading direction (the level's region is one of them); its width
-is the level's. M_s is scaled to the level's own region area (mass per
+Each region spans ``start-end`` [mm] along the spreading direction
+(``--regions``; the level's own region is always one of them); its width is
+the level's. M_s is scaled to the level's own region area (mass per
 area), so that every region's numbers read in the same units; Q_s, R_q and
 Phi do not depend on the area.
 
@@ -78,57 +78,59 @@ def measure(task) -> list[dict]:
     layer, regions, area_ref, density, n_lines, seed = task
     frame = read_dump(layer["dump"])
     rows = []
-    for start_mm, region in regions:
-        report = to_report_units(spread_layer_metrics(
-            frame, region, layer["U_mm_s"] * 1e-3, density, substrate=layer["substrate"],
-            n_lines=n_lines, seed=seed))
+    for label, region in regions:
+        try:
+            report = to_report_units(spread_layer_metrics(
+                frame, region, layer["U_mm_s"] * 1e-3, density, substrate=layer["substrate"],
+                n_lines=n_lines, seed=seed))
+        except ValueError:  # the region reaches past this layer's box (a shorter travel): not measured
+            report = dict.fromkeys(METRICS, np.nan)
         area = (region[1] - region[0]) * (region[3] - region[2])
         row = {k: v for k, v in layer.items() if k not in ("dump", "substrate")}
-        row.update({"start_mm": start_mm, "length_mm": (region[1] - region[0]) * 1e3,
+        row.update({"region_mm": label, "start_mm": region[0] * 1e3, "end_mm": region[1] * 1e3,
+                    "length_mm": (region[1] - region[0]) * 1e3,
                     **{k: report[k] for k in METRICS}})
         row["mass_g"] *= area_ref / area
         rows.append(row)
     return rows
 
 
-def summarise(runs: pd.DataFrame, own_start_mm: float) -> pd.DataFrame:
-    """Per region: pooled seed sd (replicates), the map's spread, R_max and the bias."""
+def summarise(runs: pd.DataFrame, own: str) -> pd.DataFrame:
+    """Per region (``region_mm`` label): pooled seed sd (replicates), the map's spread, R_max, and the
+    shift from the level's own region ``own``, on the map's runs and on the replicates (paired)."""
+    point = ["U_mm_s", "omega_rad_s"]
     rep = runs[runs["source"] == "replicates"]
     mapped = runs[runs["source"] == "map"]
-    point = ["U_mm_s", "omega_rad_s"]
-    own_sd = {}
-    rows = []
-    for start in sorted(runs["start_mm"].unique()):
-        row = {"start_mm": start, "length_mm": runs.loc[runs["start_mm"] == start, "length_mm"].iloc[0]}
-        r = rep[rep["start_mm"] == start]
-        for k, name in METRICS.items():
+    labels = list(dict.fromkeys(runs.sort_values(["length_mm", "start_mm"])["region_mm"]))
+    sd = {}
+    for label in labels:
+        r = rep[rep["region_mm"] == label]
+        dof = int((r.groupby(point).size() - 1).sum())
+        for k in METRICS:
             dev = r[k] - r.groupby(point)[k].transform("mean")
-            dof = (r.groupby(point)[k].transform("size") - 1).groupby([r[c] for c in point]).first().sum()
-            sd = float(np.sqrt((dev**2).sum() / dof)) if dof > 0 else np.nan
-            row[f"{name}_sd_pct"] = 100 * sd / r[k].abs().mean() if len(r) else np.nan
-            if start == own_start_mm:
-                own_sd[k] = sd
-            row[f"_{k}_sd"] = sd
-            m = mapped[mapped["start_mm"] == start]
+            sd[label, k] = float(np.sqrt((dev**2).sum() / dof)) if dof > 0 else np.nan
+    rows = []
+    for label in labels:
+        one = runs[runs["region_mm"] == label].iloc[0]
+        row = {"region_mm": label, "length_mm": one["length_mm"]}
+        r, m = rep[rep["region_mm"] == label], mapped[mapped["region_mm"] == label]
+        for k, name in METRICS.items():
+            s = sd[label, k]
+            row[f"{name}_sd_pct"] = 100 * s / r[k].abs().mean() if len(r) else np.nan
             var_map = float(m[k].var(ddof=1)) if len(m) > 1 else np.nan
-            row[f"{name}_R_max"] = (float(np.sqrt(max(0.0, 1 - sd**2 / var_map)))
-                                    if var_map > 0 and np.isfinite(sd) else np.nan)
+            row[f"{name}_R_max"] = (float(np.sqrt(max(0.0, 1 - s**2 / var_map)))
+                                    if var_map > 0 and np.isfinite(s) else np.nan)
+        for source, frame, by in (("map", mapped, "omega_rad_s"), ("rep", rep, point)):
+            base = frame[frame["region_mm"] == own].set_index(point + ["seed"])
+            other = frame[frame["region_mm"] == label].set_index(point + ["seed"])
+            for k, name in METRICS.items():
+                # each run's shift from its own value over the level's region, in that region's seed sd;
+                # the largest mean shift of one omega's runs (map: over its U's) or of one point (replicates)
+                shift = (other[k] - base[k]).dropna() / sd.get((own, k), np.nan)
+                worst = shift.groupby(level=by).mean().abs().max() if len(shift) else np.nan
+                row[f"{name}_{source}_shift_sd"] = worst
         rows.append(row)
-    table = pd.DataFrame(rows)
-    # bias: each map run's shift from its value over the level's region, in that region's seed sd; the
-    # worst omega's mean shift (over its U's: the layer's run-in depends on the roller's turning, not on U)
-    own = mapped[mapped["start_mm"] == own_start_mm].set_index(point + ["seed"])
-    for k, name in METRICS.items():
-        mean_bias, worst = [], []
-        for start in table["start_mm"]:
-            other = mapped[mapped["start_mm"] == start].set_index(point + ["seed"])
-            shift = (other[k] - own[k]).dropna() / own_sd.get(k, np.nan)
-            by_omega = shift.groupby(level="omega_rad_s").mean()
-            mean_bias.append(shift.mean() if len(shift) else np.nan)
-            worst.append(by_omega.abs().max() if len(by_omega) else np.nan)
-        table[f"{name}_bias_sd"] = mean_bias
-        table[f"{name}_worst_omega_sd"] = worst
-    return table.drop(columns=[c for c in table if c.startswith("_")])
+    return pd.DataFrame(rows)
 
 
 def main(argv=None) -> int:
@@ -137,8 +139,7 @@ def main(argv=None) -> int:
     parser.add_argument("--map", type=Path, default=None, help="a map's runs folder (results/<level>/runs)")
     parser.add_argument("--level", default="default")
     parser.add_argument("--variant", default="default", help="the kept variant whose replicates give the noise")
-    parser.add_argument("--starts", default="1,2,3,4,5,6", help="region starts [mm]")
-    parser.add_argument("--end-mm", type=float, default=None, help="region end [mm]; default the level's")
+    parser.add_argument("--regions", default="4-9,5-9,6-10,6-12", help="regions start-end [mm], comma-separated")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--name", default="region_noise")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
@@ -146,12 +147,17 @@ def main(argv=None) -> int:
     config = load_config(ROOT / "config.yaml")
     s = scene(config, args.level)
     x0, x1, y0, y1 = s.sampling_region
-    own_start = round(x0 * 1e3, 6)
-    end = args.end_mm * 1e-3 if args.end_mm is not None else x1
-    starts = sorted({float(v) for v in args.starts.split(",")} | {own_start})
-    if any(v * 1e-3 >= end for v in starts):
-        parser.error(f"--starts {args.starts!r} must all lie before the region's end {end * 1e3:g} mm")
-    regions = [(v, (v * 1e-3, end, y0, y1)) for v in starts]
+    own = f"{x0 * 1e3:g}-{x1 * 1e3:g}"
+    regions = {own: (x0, x1, y0, y1)}
+    for label in args.regions.split(","):
+        try:
+            a, b = (float(v) for v in label.split("-"))
+        except ValueError:
+            parser.error(f"--regions: {label!r} is not start-end in mm (e.g. 6-12)")
+        if not b > a:
+            parser.error(f"--regions: {label!r} ends before it starts")
+        regions[f"{a:g}-{b:g}"] = (a * 1e-3, b * 1e-3, y0, y1)
+    regions = list(regions.items())
     found = layers(args.replicates, args.map, args.variant)
     if not found:
         parser.error(f"no layers found under --replicates {args.replicates} (variant {args.variant!r}) "
@@ -168,20 +174,20 @@ def main(argv=None) -> int:
     runs = pd.DataFrame(rows)
     args.out.mkdir(parents=True, exist_ok=True)
     runs.to_csv(args.out / f"{args.name}.csv", index=False)
-    table = summarise(runs, own_start)
+    table = summarise(runs, own)
     command = " ".join(argv if argv is not None else sys.argv[1:])
-    counts = runs[runs["start_mm"] == own_start].groupby("source").size().to_dict()
+    counts = runs[runs["region_mm"] == own].groupby("source").size().to_dict()
     text = (f"# Noise against the sampling region's length ({args.level} level)\n\n"
             f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, in "
             f"{time.perf_counter() - started:.0f} s (no DEM: layers re-measured), by\n"
             f"`.venv/bin/python benchmarks/bench_region.py {command}`.\n\n"
             f"Layers: {counts.get('replicates', 0)} replicated runs (variant `{args.variant}`), "
-            f"{counts.get('map', 0)} map runs. Regions end at {end * 1e3:g} mm; the level's own starts at "
-            f"{own_start:g} mm. M_s per the level's region area.\n\n"
+            f"{counts.get('map', 0)} map runs. The level's own region: {own} mm. M_s per its area.\n\n"
             "- `<m>_sd_pct`: pooled seed sd over the replicated points, % of the mean;\n"
             "- `<m>_R_max`: sqrt(1 - sd^2 / var over the map's runs), the best R a surrogate can reach;\n"
-            "- `<m>_bias_sd`: mean shift of a map run from its value over the level's region, in that "
-            "region's pooled seed sd; `<m>_worst_omega_sd`: the largest such mean shift of one omega's runs.\n\n"
+            "- `<m>_map_shift_sd`: the largest mean shift of one omega's map runs (over its U's) from their "
+            "values over the level's region, in that region's pooled seed sd; `<m>_rep_shift_sd`: the same "
+            "for one point's replicates (the same layers, paired).\n\n"
             + table.to_markdown(index=False, floatfmt=".2f") + "\n")
     (args.out / f"{args.name}.md").write_text(text)
     print(text)
