@@ -43,13 +43,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.config.fidelity import scene
-from analysis.config.load import load_config
-from analysis.metrics.dump import read_dump
-from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units
-
 ROOT = Path(__file__).resolve().parent.parent
-METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from analysis.config.fidelity import scene  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
+from analysis.metrics.dump import read_dump  # noqa: E402
+from analysis.metrics.noise_floor import POOLED, noise_floor  # noqa: E402
+from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units  # noqa: E402
+from benchmarks.bench_fidelity import METRICS  # noqa: E402
+
 KEPT = re.compile(r"(?P<variant>.+)_s(?P<seed>\d+)_U(?P<U>[-\d.]+)_w(?P<omega>[-\d.]+)$")
 MAP_RUN = re.compile(r"U(?P<U>[-\d.]+)_w(?P<omega>[-\d.]+)_r(?P<seed>\d+)$")
 
@@ -102,21 +105,19 @@ def summarise(runs: pd.DataFrame, own: str) -> pd.DataFrame:
     rep = runs[runs["source"] == "replicates"]
     mapped = runs[runs["source"] == "map"]
     labels = list(dict.fromkeys(runs.sort_values(["length_mm", "start_mm"])["region_mm"]))
-    sd = {}
+    floor = {}  # the replicates' pooled seed sd per region: the workflow's noise floor (its pooled row)
     for label in labels:
-        r = rep[rep["region_mm"] == label]
-        dof = int((r.groupby(point).size() - 1).sum())
-        for k in METRICS:
-            dev = r[k] - r.groupby(point)[k].transform("mean")
-            sd[label, k] = float(np.sqrt((dev**2).sum() / dof)) if dof > 0 else np.nan
+        table = noise_floor(rep[rep["region_mm"] == label]).set_index("point")
+        floor[label] = table.loc[POOLED] if POOLED in table.index else pd.Series(dtype=float)
+    sd = {(label, k): float(floor[label].get(f"{k}_sd", np.nan)) for label in labels for k in METRICS}
     rows = []
     for label in labels:
         one = runs[runs["region_mm"] == label].iloc[0]
         row = {"region_mm": label, "length_mm": one["length_mm"]}
-        r, m = rep[rep["region_mm"] == label], mapped[mapped["region_mm"] == label]
+        m = mapped[mapped["region_mm"] == label]
         for k, name in METRICS.items():
             s = sd[label, k]
-            row[f"{name}_sd_pct"] = 100 * s / r[k].abs().mean() if len(r) else np.nan
+            row[f"{name}_sd_pct"] = float(floor[label].get(f"{k}_rel_pct", np.nan))
             var_map = float(m[k].var(ddof=1)) if len(m) > 1 else np.nan
             row[f"{name}_R_max"] = (float(np.sqrt(max(0.0, 1 - s**2 / var_map)))
                                     if var_map > 0 and np.isfinite(s) else np.nan)
