@@ -67,9 +67,10 @@ def test_a_swept_integer_key_stays_an_integer():
     ("surrogate__grid_points", 100000, "maximum of 1001"),
     ("sweep__U_mm_s", [1e-9, 40], "at most 2147483647 fit a LIGGGHTS run"),
     ("fidelity__smoke__settle_time_s", 1e6, "at most 2147483647 fit a LIGGGHTS run"),
-    ("sweep__U_mm_s", [40, 1900], "more than 0.1 of the smallest radius"),
+    ("sweep__omega_rad_s", [-20, -15, -10, -5, 0, 5, 10, 15, 400], "more than 0.1 of the smallest radius"),
     ("surrogate__cv_folds", 50, "exceeds the sweep's 45 points"),
     ("material__youngs_modulus_dem_Pa", 1000, "minimum of 5000000"),             # found by 5000 fuzz cases
+    ("fidelity__smoke__youngs_modulus_dem_Pa", 1000, "minimum of 5000000"),
     ("fidelity__default__run_out_mm", 299856, "fidelity.default.sampling_start_mm + sampling_length_mm + run_out_mm"),
     ("roller__diameter_mm", 2.6815615859885194e+157, "maximum of 1000"),        # found by 5000 fuzz cases at 1c56d9f
     ("roller__diameter_mm", 596477, "maximum of 1000"),                         # (an overflow; a message without it)

@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 from analysis.config.fidelity import scene
+from analysis.config.sweep import resolve
 from analysis.dem.health import substrate_height_at
 from analysis.dem.inputs import (
     FEED_BEHIND_FRONT_DIAMETERS,
@@ -23,7 +24,7 @@ from analysis.dem.inputs import (
     processors_grid,
     travel_segments,
 )
-from analysis.dem.liggghts import LiggghtsError, check_seeds, input_path, read_log, run
+from analysis.dem.liggghts import LiggghtsError, UnstableRunError, check_seeds, input_path, read_log, run
 from analysis.dem.simulate import make_geometry, settle, spread
 from analysis.metrics.dump import read_dump
 from benchmarks.restitution_drop import drop_sphere, first_bounce, free_fall_time
@@ -159,6 +160,24 @@ def test_time_step_is_the_configured_fraction_of_the_rayleigh_time(smoke, config
     assert h["rayleigh_fraction"] == pytest.approx(config["timestep"]["rayleigh_fraction"], rel=1e-3)
     assert h["rayleigh_fraction"] <= config["timestep"]["max_rayleigh_fraction"]
     assert h["hertz_fraction"] < 0.2
+
+
+def test_a_spread_that_blows_up_runs_again_at_the_retry_step(smoke, config):
+    """At 1.2 Rayleigh times the smoke spread blows up in LIGGGHTS (benchmarks/measured/stress.md):
+    without a retry it is refused; with timestep.unstable_retry_fraction it runs once more from the
+    start at that step, lays the same layer as a run made there, and says so in its health."""
+    root = smoke["root"]
+    steep = {"timestep.rayleigh_fraction": 1.2, "timestep.max_rayleigh_fraction": 1.2}
+    args = ("smoke", U_MM_S, OMEGA, root / "meshes", root / "settle")
+    with pytest.raises(UnstableRunError, match="blow-up|through the roller"):
+        spread(resolve(config, {**steep, "timestep.unstable_retry_fraction": None}), *args, root / "unstable")
+    retry = config["timestep"]["rayleigh_fraction"]
+    h = spread(resolve(config, {**steep, "timestep.unstable_retry_fraction": retry}), *args, root / "unstable")
+    assert h["unstable_retries"] == 1 and ("blow-up" in h["unstable_error"] or "roller" in h["unstable_error"])
+    assert h["timestep_s"] == smoke["spread"]["timestep_s"]
+    assert h["rayleigh_fraction"] == pytest.approx(retry, rel=1e-3)
+    assert (h["atoms"], h["lost"]) == (smoke["spread"]["atoms"], 0)
+    assert smoke["spread"]["unstable_retries"] == 0
 
 
 def test_settled_bed_solid_fraction_is_that_of_poured_spheres(smoke):

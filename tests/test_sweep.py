@@ -130,6 +130,15 @@ def test_a_bad_swept_value_names_its_axis_and_value(base, sweep, words):
     assert "\n" not in str(err.value)
 
 
+def test_a_stiffness_swept_where_the_level_sets_its_own_is_refused(base):
+    """The smoke level sets its own Young's modulus: a swept material's would change nothing there."""
+    config = with_sweep({**base, "level": "smoke"}, **{"material.youngs_modulus_dem_Pa": [2e7, 5e7]})
+    with pytest.raises(ConfigError, match="fidelity.smoke.youngs_modulus_dem_Pa sets the stiffness at level smoke"):
+        load_config(config, base_dir=ROOT)
+    config["sweep"]["fidelity.smoke.youngs_modulus_dem_Pa"] = config["sweep"].pop("material.youngs_modulus_dem_Pa")
+    load_config(config, base_dir=ROOT)
+
+
 def test_a_gap_below_the_configs_own_is_refused_naming_the_fix(base):
     """The heap is settled, and the substrate's peaks capped, under roller.gap_um: a smaller
     swept gap could meet the substrate's peaks, so the config names the fix."""

@@ -144,6 +144,11 @@ def check_sweep(config: dict, base_dir: Path = Path(".")) -> None:
     sweep, axes = config["sweep"], sweep_axes(config)
     for axis in axes:
         check_axis_key(config, axis)
+    level = config["level"]
+    if "material.youngs_modulus_dem_Pa" in axes and "youngs_modulus_dem_Pa" in config["fidelity"].get(level, {}):
+        refuse("sweep.material.youngs_modulus_dem_Pa", sweep["material.youngs_modulus_dem_Pa"],
+              f"is swept, but fidelity.{level}.youngs_modulus_dem_Pa sets the stiffness at level {level}: "
+              f"sweep fidelity.{level}.youngs_modulus_dem_Pa instead, or remove it")
     if sweep.get("points") and sweep.get("points_mm_s_rad_s"):
         refuse("sweep.points", "...", "and sweep.points_mm_s_rad_s are both given: keep one")
     if axes and sweep.get("points_mm_s_rad_s"):
@@ -201,7 +206,7 @@ def check_speeds(config: dict) -> None:
                   f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm (from behind the heap, a roller.diameter_mm behind "
                   f"fidelity.{s.level}.heap_start_mm, heap_length_mm and heap_particles, to the end of "
                   f"fidelity.{s.level}.sampling_start_mm + sampling_length_mm + run_out_mm; the step is "
-                  f"timestep.rayleigh_fraction of the Rayleigh time of material.youngs_modulus_dem_Pa): "
+                  f"timestep.rayleigh_fraction of the Rayleigh time of the level's Young's modulus): "
                   f"at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
         r_min = min(s.diameters) / 2
         for p in points:
@@ -213,7 +218,7 @@ def check_speeds(config: dict) -> None:
                       f"moves the roller's surface {wall * 1e6:.3g} um a time step of {s.timestep:.3g} s (U = "
                       f"{p['U_mm_s']:g} mm/s, omega = {p['omega_rad_s']:g} rad/s): more than {MAX_WALL_STEP:g} of the "
                       f"smallest radius ({r_min * 1e6:.3g} um); lower the speeds or the time step "
-                      "(timestep.rayleigh_fraction of the Rayleigh time set by material.youngs_modulus_dem_Pa, "
+                      "(timestep.rayleigh_fraction of the Rayleigh time set by the level's Young's modulus, "
                       "density_kg_m3 and psd.min_diameter_um)")
 
 

@@ -59,6 +59,13 @@ class Scene:
         return self.density * number_mean_volume(self.diameters, self.mass_fractions)
 
 
+def youngs_modulus(config: dict, level: str) -> float:
+    """Young's modulus [Pa] of the particles at fidelity level ``level``: the level's own
+    ``youngs_modulus_dem_Pa`` where it sets one (the smoke level, which checks the workflow, not
+    the physics), else the material's."""
+    return config["fidelity"][level].get("youngs_modulus_dem_Pa", config["material"]["youngs_modulus_dem_Pa"])
+
+
 def scene(config: dict, level: str | None = None) -> Scene:
     """Resolve fidelity level ``level`` (default ``config['level']``) into a :class:`Scene`."""
     level = level or config["level"]
@@ -80,8 +87,8 @@ def scene(config: dict, level: str | None = None) -> Scene:
     sample_x1 = sample_x0 + lvl["sampling_length_mm"] * mm
     sample_w = lvl.get("sampling_width_mm", lvl["strip_width_mm"]) * mm
     y0 = (width - sample_w) / 2
-    t_r = rayleigh_time(diameters.min() / 2, mat["density_kg_m3"], mat["youngs_modulus_dem_Pa"],
-                        mat["poisson_ratio"])
+    youngs = youngs_modulus(config, level)
+    t_r = rayleigh_time(diameters.min() / 2, mat["density_kg_m3"], youngs, mat["poisson_ratio"])
     sub = config["substrate"]
     pile = lvl.get("feed_pile_mg_per_mm")
     feed_pile_mass = None if pile is None else pile * 1e-6 / mm * width
@@ -100,7 +107,7 @@ def scene(config: dict, level: str | None = None) -> Scene:
         travel_end=sample_x1 + lvl["run_out_mm"] * mm,
         roller_radius=radius, roller_gap=gap, roller_facets=roller["facets_around"],
         diameters=tuple(diameters), mass_fractions=tuple(fractions),
-        density=mat["density_kg_m3"], youngs_modulus=mat["youngs_modulus_dem_Pa"],
+        density=mat["density_kg_m3"], youngs_modulus=youngs,
         poisson_ratio=mat["poisson_ratio"], restitution=mat["restitution"],
         friction_particle=mat["sliding_friction_particle"], friction_wall=mat["sliding_friction_wall"],
         rolling_friction=mat["rolling_friction"], cohesion_energy_density=mat["cohesion_energy_density_J_m3"],

@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 
 from analysis.config.fidelity import Scene
 from analysis.dem import geometry
-from analysis.dem.liggghts import LiggghtsError
+from analysis.dem.liggghts import LiggghtsError, UnstableRunError
 from analysis.metrics.dump import read_dump
 from analysis.metrics.profilometer import substrate_height
 from analysis.physics import MAX_OVERLAP
@@ -146,11 +146,11 @@ def check_kinetic_energy(log: dict, wall_speed: float = 0.0, squeeze_speed: floa
     energy, vmax = thermo["KinEng"].to_numpy(), thermo["vmax"].to_numpy()
     bad = ~np.isfinite(energy) | ~np.isfinite(vmax)
     if bad.any():
-        raise LiggghtsError(f"unsound run: kinetic energy not finite at step {int(thermo['Step'][bad].iloc[0])}")
+        raise UnstableRunError(f"unsound run: kinetic energy not finite at step {int(thermo['Step'][bad].iloc[0])}")
     fast = vmax > limit
     if fast.any():
         first = np.argmax(fast)
-        raise LiggghtsError(f"unsound run: kinetic-energy blow-up, a particle at {vmax[first]:.3g} m/s at step "
+        raise UnstableRunError(f"unsound run: kinetic-energy blow-up, a particle at {vmax[first]:.3g} m/s at step "
                             f"{int(thermo['Step'].iloc[first])} (limit {limit:.3g} m/s = max({BLOWUP_FLOOR_M_S:g}, "
                             f"{BLOWUP_SPEED_FACTOR} x the fastest wall's {wall_speed:.3g} m/s, squeeze-out "
                             f"{squeeze_speed:.3g} m/s)): lower the time step")

@@ -49,6 +49,11 @@ class LiggghtsError(RuntimeError):
     """LIGGGHTS failed, or its run is not physically sound; the message says why."""
 
 
+class UnstableRunError(LiggghtsError):
+    """The integration broke down: a kinetic-energy blow-up, or particles through the roller.
+    A smaller time step is the cure (``timestep.unstable_retry_fraction``)."""
+
+
 def render(template: str, **context) -> str:
     """Render ``templates/<template>`` with ``context``; unknown names are errors."""
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), undefined=jinja2.StrictUndefined,

@@ -30,6 +30,7 @@ from analysis.config.checks import MAX_RUN_STEPS
 from analysis.config.errors import ConfigError
 from analysis.config.fidelity import PEAK_CAP, Scene, scene
 from analysis.config.load import load_config
+from analysis.config.sweep import resolve
 from analysis.dem import geometry
 from analysis.dem.health import (
     MAX_STRAYS,
@@ -58,7 +59,7 @@ from analysis.dem.inputs import (
     skin,
     travel_segments,
 )
-from analysis.dem.liggghts import LiggghtsError, input_path, render, run
+from analysis.dem.liggghts import LiggghtsError, UnstableRunError, input_path, render, run
 from analysis.io import USER_ERRORS, error_line, write_json
 from analysis.metrics.dump import read_dump
 from analysis.physics import liggghts_seeds, roller_motion
@@ -396,7 +397,7 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
     atoms = read_dump(out / "final.dump.part").atoms
     inside = through_roller(atoms, plan.step_x(plan.travel_steps), plan.context["roller_z"], s.roller_radius)
     if inside:
-        raise LiggghtsError(f"unsound run: {inside} particles passed through the roller (centre inside it): "
+        raise UnstableRunError(f"unsound run: {inside} particles passed through the roller (centre inside it): "
                             "lower the time step or stiffen the particles")
     ahead = int(log["printed"]["particles_ahead_of_roller"])
     # the powder ahead of the stopped roller, and what rolled on under it during the rest phase
@@ -449,11 +450,30 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     (:func:`feed_plan`, :func:`feed_zone`): the layer is laid from a pile of
     a set size, however much the roller lays; ``fed_particles`` in the
     health counts what was added. ``replicate`` seeds the feed.
+
+    A run that breaks down (:class:`~analysis.dem.liggghts.UnstableRunError`: a kinetic-energy
+    blow-up, particles through the roller) runs once more from the start at
+    ``timestep.unstable_retry_fraction`` of the Rayleigh time; ``health.json`` records it
+    (``unstable_retries``, ``unstable_error``, ``timestep_s``). A second breakdown is refused.
     """
     plan = plan_spread(config, level, U_mm_s, omega_rad_s, meshes, settled, outdir, movie_every, skips, replicate)
     out = plan.out
     out.mkdir(parents=True, exist_ok=True)
-    summary = check_spread(plan, run_with_resume(plan))
+    try:
+        summary = check_spread(plan, run_with_resume(plan))
+        summary.update(unstable_retries=0, unstable_error="")
+    except UnstableRunError as err:
+        step = config["timestep"]
+        retry = step.get("unstable_retry_fraction")
+        if retry is None or retry >= step["rayleigh_fraction"]:
+            raise
+        print(f"warning: {err}\nrunning it again from the start at timestep.unstable_retry_fraction = {retry:g} "
+              f"of the Rayleigh time (was {step['rayleigh_fraction']:g})", file=sys.stderr)
+        config = resolve(config, {"timestep.rayleigh_fraction": retry})
+        plan = plan_spread(config, level, U_mm_s, omega_rad_s, meshes, settled, outdir, movie_every, skips,
+                           replicate)
+        summary = check_spread(plan, run_with_resume(plan))
+        summary.update(unstable_retries=1, unstable_error=str(err).splitlines()[0])
     _publish(out, summary, "final.dump")
     for folder in (CHECKPOINT_DIR, FEED_DIR):
         shutil.rmtree(out / folder, ignore_errors=True)
