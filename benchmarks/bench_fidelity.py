@@ -47,21 +47,22 @@ ROOT = Path(__file__).resolve().parent.parent
 METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
 
 #: Config overrides (dotted keys; ``LEVEL`` stands for the benchmarked level's
-#: fidelity block). "default" is the level as configured.
+#: fidelity block, whose ``youngs_modulus_dem_Pa`` wins over the material's). "default" is the
+#: level as configured.
 VARIANTS = {
     "default": {},
-    "reference": {"material.youngs_modulus_dem_Pa": 2.0e7, "timestep.rayleigh_fraction": 0.1,
+    "reference": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "timestep.rayleigh_fraction": 0.1,
                   "LEVEL.size_classes": 9, "LEVEL.profilometer_lines": 2000},
-    "E2e7": {"material.youngs_modulus_dem_Pa": 2.0e7},
-    "E2e6": {"material.youngs_modulus_dem_Pa": 2.0e6},
-    "E1e6": {"material.youngs_modulus_dem_Pa": 1.0e6},
+    "E2e7": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7},
+    "E2e6": {"LEVEL.youngs_modulus_dem_Pa": 2.0e6},
+    "E1e6": {"LEVEL.youngs_modulus_dem_Pa": 1.0e6},
     "dt0.1": {"timestep.rayleigh_fraction": 0.1},
     "dt0.3": {"timestep.rayleigh_fraction": 0.3},
     "classes3": {"LEVEL.size_classes": 3},
     "classes9": {"LEVEL.size_classes": 9},
     "lines200": {"LEVEL.profilometer_lines": 200},
     "ranks2": {"LEVEL.mpi_ranks": 2},
-    "E1e6+dt0.3": {"material.youngs_modulus_dem_Pa": 1.0e6, "timestep.rayleigh_fraction": 0.3},
+    "E1e6+dt0.3": {"LEVEL.youngs_modulus_dem_Pa": 1.0e6, "timestep.rayleigh_fraction": 0.3},
     # pass 2: cheaper steps and fewer roller facets, and the scene's size
     "dt0.4": {"timestep.rayleigh_fraction": 0.4},
     "facets90": {"roller.facets_around": 90},
@@ -72,20 +73,21 @@ VARIANTS = {
     "heap1.5x": {"LEVEL.heap_particles": 1350},
     "lines2000": {"LEVEL.profilometer_lines": 2000},
     # the stiffness ladder of the fed scene (docs/scene_size.md: Stiffness)
-    "E5e7": {"material.youngs_modulus_dem_Pa": 5.0e7},
-    "E1e8": {"material.youngs_modulus_dem_Pa": 1.0e8},
+    "E5e6": {"LEVEL.youngs_modulus_dem_Pa": 5.0e6},
+    "E5e7": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7},
+    "E1e8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8},
     # the fed scene's size and supply at 20 MPa (docs/scene_size.md: At the converged stiffness)
-    "E2e7+strip2.5": {"material.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 2.5,
+    "E2e7+strip2.5": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 2.5,
                       "LEVEL.heap_particles": 3800},
-    "E2e7+pile40": {"material.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.feed_pile_mg_per_mm": 40,
+    "E2e7+pile40": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.feed_pile_mg_per_mm": 40,
                     "LEVEL.heap_particles": 3640},
-    "E2e7+region6": {"material.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.sampling_length_mm": 6.0},
+    "E2e7+region6": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.sampling_length_mm": 6.0},
 }
 
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).
 HEALTH = ("heap_exhausted", "max_overlap_fraction", "max_overlap_anywhere", "peak_speed_m_s",
           "inrun_max_overlap_fraction", "inrun_max_wall_overlap_fraction", "squeeze_outs_max",
-          "fed_max_ahead_of_front_mm", "fed_share_of_region_layer")
+          "fed_max_ahead_of_front_mm", "fed_share_of_region_layer", "unstable_retries")
 
 
 def variant_config(base: dict, level: str, overrides: dict) -> dict:
