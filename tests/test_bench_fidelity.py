@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks import bench_fidelity, bench_region
+from benchmarks import bench_fidelity, bench_region, reference_front
 from benchmarks.bench_fidelity import METRICS, convergence
 
 
@@ -89,3 +89,28 @@ def test_two_ladders_from_one_base_are_each_judged_in_their_own_finer_scenes_sd(
     assert "| default -> E2e7 " in table and "| default -> E5e7 " in table
     steps = convergence(runs, ["default", "E2e7"]), convergence(runs, ["default", "E5e7"])
     assert not steps[0]["converged"].iloc[0] and steps[1]["converged"].iloc[0]  # 2 sds off, then 0.5
+
+
+def test_the_reference_front_judges_and_costs_each_knob_once_per_run(tmp_path):
+    """``reference_front.py`` on hand-made run tables: a run repeated in two tables counts once, a
+    CSV's ``default`` is renamed, each knob's shift is in its finer scene's sd and its cost relative
+    to the default scene."""
+    base = {"mass_g": 1.0, "throughput_mm2_s": 20.0, "roughness_um": 80.0, "porosity_pct": 40.0}
+    sds = {k: 0.02 * v for k, v in base.items()}
+    stiff = pd.DataFrame(runs_of("default", {**base, "mass_g": 1.06}, sds) + runs_of("E2e7", base, sds)
+                         ).assign(cpu_s=lambda d: d["variant"].map({"default": 50.0, "E2e7": 100.0}))
+    strip = pd.DataFrame(runs_of("E2e7", base, sds) + runs_of("E2e7+strip2.5", {**base, "mass_g": 1.01}, sds)
+                         ).assign(cpu_s=lambda d: d["variant"].map({"E2e7": 100.0, "E2e7+strip2.5": 200.0}))
+    stiff.to_csv(tmp_path / "a.csv", index=False)
+    strip.to_csv(tmp_path / "b.csv", index=False)
+    assert reference_front.main(["--runs", "a.csv,b.csv", "--measured", str(tmp_path), "--name", "front"]) == 0
+    table = pd.read_csv(tmp_path / "front.csv").set_index("knob")
+    assert list(table.index) == ["stiffness 5 -> 20 MPa", "strip 1.2 -> 2.5 mm (20 MPa)"]
+    soft, wide = table.loc["stiffness 5 -> 20 MPa"], table.loc["strip 1.2 -> 2.5 mm (20 MPa)"]
+    assert soft["M_s shift (finer sds)"] == pytest.approx(3.0) and not soft["converged"]   # 0.06 / 0.02
+    assert wide["largest shift (finer sds)"] == pytest.approx(0.5) and wide["converged"]
+    assert (soft["cpu_coarser_rel"], soft["cpu_finer_rel"], wide["cpu_finer_rel"]) == pytest.approx((0.5, 1, 2))
+    assert (tmp_path / "front.png").stat().st_size > 0 and "| stiffness 5 -> 20 MPa" in (
+        tmp_path / "front.md").read_text()
+    with pytest.raises(SystemExit):
+        reference_front.main(["--runs", "a.csv,none.csv", "--measured", str(tmp_path)])
