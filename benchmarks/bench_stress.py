@@ -2,7 +2,7 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_stress.py [--level smoke] [--jobs 2] [--name stress]
+    .venv/bin/python benchmarks/bench_stress.py [--level smoke] [--jobs 2] [--name stress] [--cases "a;b"] [--out DIR]
 
 Pushes one knob at a time past the configured range -- the time step as a
 fraction of the Rayleigh time (with the wrapper's own guard lifted, to see
@@ -14,7 +14,8 @@ through the substrate or the roller, kinetic-energy blow-up, overlaps above
 the limit, or LIGGGHTS' own refusal) and the health figures of the cases that
 pass (largest overlap, peak particle speed).
 
-Writes ``benchmarks/measured/<name>.csv`` and ``<name>.md`` (machine, date).
+Writes ``<out>/<name>.csv`` and ``<name>.md`` (machine, date; ``--out`` default ``benchmarks/measured``).
+No case retries at a smaller step (``timestep.unstable_retry_fraction``): what breaks is the finding.
 """
 from __future__ import annotations
 
@@ -60,14 +61,15 @@ CASES = {
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--level", default="smoke")
-    parser.add_argument("--cases", help="comma-separated case names (default: all)")
+    parser.add_argument("--cases", help="case names separated by ; (some hold commas; default: all)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--name", default="stress")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     parser.add_argument("--update", action="store_true",
                         help="re-run only --cases and replace their rows in the existing <name>.csv")
     args = parser.parse_args(argv)
     base = load_config(ROOT / "config.yaml")
-    names = args.cases.split(",") if args.cases else list(CASES)
+    names = [n.strip() for n in args.cases.split(";")] if args.cases else list(CASES)
     unknown = [n for n in names if n not in CASES]
     if unknown:
         parser.error(f"unknown case(s) {unknown}; known: {list(CASES)}")
@@ -76,7 +78,7 @@ def main(argv=None) -> int:
     same_step["timestep.rayleigh_fraction"] = base["timestep"]["rayleigh_fraction"] * (
         same_step["LEVEL.youngs_modulus_dem_Pa"] / youngs_modulus(base, args.level)) ** 0.5
     # no second attempt at a smaller step (timestep.unstable_retry_fraction): what breaks is the finding
-    tasks = [(n, variant_config(base, args.level, {**NO_RETRY, **CASES[n][0]}), args.level, 0, CASES[n][1])
+    tasks = [(n, variant_config(base, args.level, {**NO_RETRY, **CASES[n][0]}), args.level, 0, CASES[n][1], None)
              for n in names]
     started = time.perf_counter()
     with ProcessPoolExecutor(args.jobs) as pool:
@@ -85,7 +87,7 @@ def main(argv=None) -> int:
     if "error" not in runs:
         runs["error"] = None
     runs["outcome"] = runs["error"].fillna("passes all checks")
-    out = ROOT / "benchmarks" / "measured"
+    out = args.out
     if args.update and (out / f"{args.name}.csv").exists():
         old = pd.read_csv(out / f"{args.name}.csv")
         runs = pd.concat([old[~old["variant"].isin(names)], runs], ignore_index=True)

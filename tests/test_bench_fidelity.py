@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks import bench_fidelity, bench_region, reference_front
+from benchmarks import bench_fidelity, bench_region, bench_stress, reference_front
 from benchmarks.bench_fidelity import METRICS, convergence
 
 
@@ -114,3 +114,14 @@ def test_the_reference_front_judges_and_costs_each_knob_once_per_run(tmp_path):
         tmp_path / "front.md").read_text()
     with pytest.raises(SystemExit):
         reference_front.main(["--runs", "a.csv,none.csv", "--measured", str(tmp_path)])
+
+
+def test_the_stress_benchmark_records_the_check_that_refused_a_case(tmp_path):
+    """bench_stress.py's smoke run: a step past the wrapper's guard is refused before LIGGGHTS runs,
+    and the table names the check; a stiffness case sets the level's own Young's modulus."""
+    assert bench_stress.main(["--cases", "dt 0.6 T_R, guarded", "--jobs", "1", "--name", "s",
+                              "--out", str(tmp_path)]) == 0
+    row = pd.read_csv(tmp_path / "s.csv").iloc[0]
+    assert row["variant"] == "dt 0.6 T_R, guarded" and "exceeds the allowed fraction" in row["outcome"]
+    assert "| dt 0.6 T_R, guarded " in (tmp_path / "s.md").read_text()
+    assert set(bench_stress.CASES["E 50 MPa (stiffer)"][0]) == {"LEVEL.youngs_modulus_dem_Pa"}
