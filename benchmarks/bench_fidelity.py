@@ -82,6 +82,12 @@ VARIANTS = {
     "E2e7+pile40": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.feed_pile_mg_per_mm": 40,
                     "LEVEL.heap_particles": 3640},
     "E2e7+region6": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.sampling_length_mm": 6.0},
+    # the feed at the 20 MPa default: top-ups twice as often, and no feed from a heap that lasts
+    # (72 mg/mm: the pile's 20 plus what forward rolling lays over the 13 mm travel, with margin)
+    "feed0.25": {"LEVEL.feed_every_mm": 0.25},
+    "unfed72": {"LEVEL.feed_pile_mg_per_mm": None, "LEVEL.heap_particles": 6560},
+    # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction
+    "dt0.5": {"timestep.rayleigh_fraction": 0.5},
 }
 
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).

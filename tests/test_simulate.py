@@ -317,6 +317,11 @@ def test_feed_starts_once_its_zone_covers_the_heap_and_repeats_every_half_mm(con
     assert -0.01 + 8e-3 + speed * s.timestep * first == pytest.approx(0.003, abs=speed * s.timestep)
     assert np.all(np.diff(plan) == every) and plan[-1] < 40 * every
     assert feed_plan(replace(s, feed_pile_mass=None), -0.01, speed, 1000, 0.003) == []   # no feed configured
+    quarter = {**config, "fidelity": {**config["fidelity"], "default": {**config["fidelity"]["default"],
+                                                                        "feed_every_mm": 0.25}}}
+    s4 = replace(scene(quarter, "default"), feed_pile_mass=1e-5, feed_length=8e-3)
+    denser = feed_plan(s4, x0=-0.01, speed=speed, travel_steps=40 * every, heap_toe=0.003)
+    assert denser[0] == first and np.all(np.diff(denser) == round(0.25e-3 / (speed * s.timestep)))
 
 
 def test_processors_grid_cuts_a_strip_across_its_width(config):

@@ -93,20 +93,15 @@ def checkpoint_plan(travel_steps: int, count: int, resume_step: int = 0) -> list
     return list(zip(steps, [resume_step or None] + steps[:-1]))
 
 
-#: Travel [m] of the roller between two top-ups of a fed pile (``feed_pile_mg_per_mm``):
-#: the pile dips by at most the layer laid over it (about 2 % of a 20 mg/mm pile).
-FEED_EVERY = 0.5e-3
-
-
 def feed_plan(s: Scene, x0: float, speed: float, travel_steps: int, heap_toe: float) -> list[int]:
-    """Steps of the travel at which a fed pile is topped up: every :data:`FEED_EVERY`
-    of travel, from the step at which the feed zone (``s.feed_length`` ahead of the
+    """Steps of the travel at which a fed pile is topped up: every ``s.feed_every`` [m]
+    of travel (``feed_every_mm``), from the step at which the feed zone (``s.feed_length`` ahead of the
     roller axis, which starts at ``x0`` [m]) first covers the settled heap's toe
     ``heap_toe`` [m], so the heap itself is counted before anything is added.
     Empty without a feed."""
     if s.feed_pile_mass is None:
         return []
-    every = max(1, round(FEED_EVERY / (speed * s.timestep)))
+    every = max(1, round(s.feed_every / (speed * s.timestep)))
     first = max(0, ceil((heap_toe - s.feed_length - x0) / (speed * s.timestep)))
     return list(range(first, travel_steps, every))
 
