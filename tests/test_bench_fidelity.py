@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks import bench_fidelity, bench_region, bench_stress, reference_front
+from benchmarks import bench_fidelity, bench_region, bench_stress, compare_maps, reference_front
 from benchmarks.bench_fidelity import METRICS, convergence
 
 
@@ -125,3 +125,28 @@ def test_the_stress_benchmark_records_the_check_that_refused_a_case(tmp_path):
     assert row["variant"] == "dt 0.6 T_R, guarded" and "exceeds the allowed fraction" in row["outcome"]
     assert "| dt 0.6 T_R, guarded " in (tmp_path / "s.md").read_text()
     assert set(bench_stress.CASES["E 50 MPa (stiffer)"][0]) == {"LEVEL.youngs_modulus_dem_Pa"}
+
+
+def test_two_maps_are_compared_per_group_of_points_in_the_seed_sd_given(tmp_path):
+    """compare_maps.py on hand-made datasets: a new map 10 % higher at omega < 0 and the same
+    elsewhere; the change judged in a run table's seed sd."""
+    points = [(U, w) for U in (40, 70) for w in (-10, 0, 10)]
+    base = {"mass_g": 2.0, "throughput_mm2_s": 20.0, "roughness_um": 80.0, "porosity_pct": 40.0}
+    old = pd.DataFrame([{"U_mm_s": U, "omega_rad_s": w, "replicate": 0, **base} for U, w in points])
+    new = old.copy()
+    new.loc[new["omega_rad_s"] < 0, list(METRICS)] *= 1.1
+    old.to_csv(tmp_path / "old.csv", index=False)
+    new.to_csv(tmp_path / "new.csv", index=False)
+    sds = {k: 0.05 * v for k, v in base.items()}
+    pd.DataFrame(runs_of("E2e7", base, sds)).to_csv(tmp_path / "runs.csv", index=False)
+    assert compare_maps.main([str(tmp_path / "old.csv"), str(tmp_path / "new.csv"), "--labels", "5 MPa,20 MPa",
+                              "--noise", str(tmp_path / "runs.csv"), "--noise-variant", "E2e7",
+                              "--out", str(tmp_path)]) == 0
+    table = pd.read_csv(tmp_path / "maps_compared.csv").set_index(["points", "metric"])
+    assert table.loc[("omega < 0", "M_s"), "change_pct"] == pytest.approx(10.0)
+    assert table.loc[("omega < 0", "M_s"), "abs_change_in_sds"] == pytest.approx(2.0)   # 0.2 / 0.1
+    assert table.loc[("omega > 0", "Q_s"), "change_pct"] == pytest.approx(0.0)
+    assert table.loc[("all", "Phi"), "change_pct"] == pytest.approx(10.0 / 3)
+    assert table.loc[("all", "R_q"), "20 MPa mean"] == pytest.approx(80.0 * (1 + 0.1 / 3))
+    with pytest.raises(SystemExit):
+        compare_maps.main([str(tmp_path / "old.csv"), str(tmp_path / "none.csv")])

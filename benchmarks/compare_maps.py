@@ -1,0 +1,118 @@
+"""Two maps of the same Design of Simulations side by side: how far one moved from the other.
+
+Run from the repository root (no simulation; it reads two finished maps' datasets)::
+
+    .venv/bin/python benchmarks/compare_maps.py OLD/dataset.csv NEW/dataset.csv \
+        [--labels "5 MPa,20 MPa"] [--noise benchmarks/measured/noise_default.csv | --noise RUNS.csv
+        --noise-variant NAME] [--name maps_compared]
+
+For each of the four metrics and each group of points (all, omega < 0, omega = 0, omega > 0): the
+mean of each map over the points both ran, the mean relative change ``100 (new - old) / old`` per
+point, and the mean absolute change in the pooled seed sd of ``--noise`` (optional: a noise-floor
+CSV with ``<metric>_sd`` columns per point, or a ``bench_fidelity`` run table and the variant whose
+seeds give it; its sampling region should be the maps'). Writes ``benchmarks/measured/<name>.csv`` and ``.md``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from benchmarks.bench_fidelity import METRICS  # noqa: E402
+from benchmarks.machine import commit  # noqa: E402
+
+KEYS = ["U_mm_s", "omega_rad_s"]
+GROUPS = {"all": lambda w: w == w, "omega < 0": lambda w: w < 0, "omega = 0": lambda w: w == 0,
+          "omega > 0": lambda w: w > 0}
+
+
+def point_means(dataset: pd.DataFrame) -> pd.DataFrame:
+    """The metrics' mean per (U, omega) point over its replicates."""
+    return dataset.groupby(KEYS)[list(METRICS)].mean()
+
+
+def pooled_sd(noise: pd.DataFrame, variant: str | None = None) -> dict:
+    """Root mean seed variance of each metric over a noise floor's points: a noise-floor CSV
+    (``<metric>_sd`` per point) or, with ``variant``, that variant's runs in a ``bench_fidelity``
+    run table (the sd over its seeds at each point)."""
+    if variant is not None:
+        runs = noise[(noise["variant"] == variant) & (noise["error"].isna() if "error" in noise else True)]
+        if runs.empty:
+            raise ValueError(f"no runs of variant {variant!r} in the noise table")
+        sd = runs.groupby(KEYS)[list(METRICS)].std()
+        return {k: float(np.sqrt((sd[k] ** 2).mean())) for k in METRICS}
+    return {k: float(np.sqrt((noise[f"{k}_sd"] ** 2).mean())) for k in METRICS if f"{k}_sd" in noise}
+
+
+def compare(old: pd.DataFrame, new: pd.DataFrame, sds: dict | None = None) -> pd.DataFrame:
+    """One row per (group of points, metric): both maps' means, the mean relative change [%] and,
+    with ``sds`` (metric -> pooled seed sd), the mean absolute change in those sds."""
+    a, b = point_means(old), point_means(new)
+    shared = a.index.intersection(b.index)
+    if shared.empty:
+        raise ValueError("the two datasets share no (U, omega) point")
+    a, b = a.loc[shared], b.loc[shared]
+    omega = shared.get_level_values("omega_rad_s").to_numpy()
+    rows = []
+    for group, pick in GROUPS.items():
+        mask = pick(omega)
+        if not mask.any():
+            continue
+        for k, name in METRICS.items():
+            x, y = a[k].to_numpy()[mask], b[k].to_numpy()[mask]
+            row = {"points": group, "n": int(mask.sum()), "metric": name, "old_mean": x.mean(), "new_mean": y.mean(),
+                   "change_pct": 100 * np.mean((y - x) / x)}
+            if sds and k in sds:
+                row["abs_change_in_sds"] = np.mean(np.abs(y - x)) / sds[k]
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("old", type=Path)
+    parser.add_argument("new", type=Path)
+    parser.add_argument("--labels", default="old,new", help="the two maps' names, comma-separated")
+    parser.add_argument("--noise", type=Path, help="a noise-floor CSV (<metric>_sd per point), or a bench_fidelity "
+                        "run table with --noise-variant")
+    parser.add_argument("--noise-variant", help="the variant of --noise's runs whose seed sd judges the change")
+    parser.add_argument("--name", default="maps_compared")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
+    args = parser.parse_args(argv)
+    for path in (args.old, args.new, args.noise):
+        if path is not None and not path.is_file():
+            parser.error(f"no such file: {path}")
+    labels = args.labels.split(",")
+    if len(labels) != 2:
+        parser.error(f"--labels {args.labels!r}: give two names, comma-separated")
+    datasets = [pd.read_csv(path) for path in (args.old, args.new)]
+    try:
+        sds = pooled_sd(pd.read_csv(args.noise), args.noise_variant) if args.noise else None
+        table = compare(*datasets, sds)
+    except ValueError as err:
+        parser.error(str(err))
+    table = table.rename(columns={"old_mean": f"{labels[0]} mean", "new_mean": f"{labels[1]} mean"})
+    args.out.mkdir(parents=True, exist_ok=True)
+    table.to_csv(args.out / f"{args.name}.csv", index=False)
+    text = (f"# {labels[1]} against {labels[0]}: the same Design of Simulations\n\n"
+            f"Compared {time.strftime('%Y-%m-%d')} at commit {commit()} by\n`.venv/bin/python "
+            f"benchmarks/compare_maps.py {args.old} {args.new} --labels \"{args.labels}\""
+            + (f" --noise {args.noise}" if args.noise else "")
+            + (f" --noise-variant {args.noise_variant}" if args.noise_variant else "") + "`.\n\n"
+            "change_pct: the mean over the points of 100 (new - old) / old; abs_change_in_sds: the mean absolute "
+            "change over the pooled seed sd of the noise floor given.\n\n"
+            + table.to_markdown(index=False, floatfmt=".3g") + "\n")
+    (args.out / f"{args.name}.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
