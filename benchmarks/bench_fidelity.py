@@ -83,9 +83,9 @@ VARIANTS = {
                     "LEVEL.heap_particles": 3640},
     "E2e7+region6": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.sampling_length_mm": 6.0},
     # the feed at the 20 MPa default: top-ups twice as often, and no feed from a heap that lasts
-    # (72 mg/mm: the pile's 20 plus what forward rolling lays over the 13 mm travel, with margin)
+    # (40 mg/mm: the pile's 20 plus the 18 mg/mm forward rolling lays over the 13 mm travel at omega -15)
     "feed0.25": {"LEVEL.feed_every_mm": 0.25},
-    "unfed72": {"LEVEL.feed_pile_mg_per_mm": None, "LEVEL.heap_particles": 6560},
+    "unfed40": {"LEVEL.feed_pile_mg_per_mm": None, "LEVEL.heap_particles": 3640},
     # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction
     "dt0.5": {"timestep.rayleigh_fraction": 0.5},
 }
@@ -256,6 +256,8 @@ def main(argv=None) -> int:
     parser.add_argument("--level", default="default")
     parser.add_argument("--points", default="100:-10,100:0,100:10", help="U:omega pairs, mm/s:rad/s")
     parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="seeds first-seed .. first-seed + seeds - 1 (to add replicates to a study)")
     parser.add_argument("--variants", default="reference,default,E1e6,dt0.3,E1e6+dt0.3")
     parser.add_argument("--reference", default="reference")
     parser.add_argument("--jobs", type=int, default=2)
@@ -278,7 +280,7 @@ def main(argv=None) -> int:
         parser.error(f"unknown variant(s) {unknown} or reference {args.reference!r} not among --variants; "
                      f"known: {sorted(VARIANTS)}")
     tasks = [(n, variant_config(base, args.level, VARIANTS[n]), args.level, seed, points, args.keep)
-             for n in names for seed in range(args.seeds)]
+             for n in names for seed in range(args.first_seed, args.first_seed + args.seeds)]
     started = time.perf_counter()
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
