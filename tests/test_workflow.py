@@ -193,29 +193,33 @@ def test_report_gathers_figures(workflow):
 
 
 def test_extended_sweep_interrupted_then_resumed_runs_only_what_is_missing(workflow):
+    """A third speed added to the sweep (130 mm/s: the cheapest spreads), Snakemake and LIGGGHTS
+    killed once its first run is recorded, then resumed up to the dataset (the maps are the
+    fixture's and the gap test's business): only the missing spreads run, finished runs are untouched."""
     runs = workflow / "results/smoke/runs"
     finished = {p.parent.name: p.stat().st_mtime_ns for p in runs.glob("*/health.json")}
-    U = [70] + FIRST_U
-    killed = subprocess.Popen(snakemake_cmd(workflow, U), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              start_new_session=True)
+    U = [130] + FIRST_U
+    dataset = ["--", "results/smoke/dataset.csv"]
+    killed = subprocess.Popen([*snakemake_cmd(workflow, U), *dataset], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 600
     # a spread counts as finished once its metrics job has run: Snakemake starts
     # that only after recording the spread complete (a run killed between its
     # last write and that record is incomplete, and is rightly redone)
-    while time.time() < deadline and not list(runs.glob("U70_*/metrics.json")):
+    while time.time() < deadline and not list(runs.glob("U130_*/metrics.json")):
         time.sleep(0.5)
     os.killpg(killed.pid, signal.SIGKILL)      # a crash: no clean-up at all
     killed.wait()
-    recorded = {p.parent.name for p in runs.glob("U70_*/metrics.json")}
-    written = {p.parent.name for p in runs.glob("U70_*/health.json")}
+    recorded = {p.parent.name for p in runs.glob("U130_*/metrics.json")}
+    written = {p.parent.name for p in runs.glob("U130_*/health.json")}
     assert 1 <= len(recorded) < 3
     # an interrupted run left no result that looks finished
-    for run in runs.glob("U70_*"):
+    for run in runs.glob("U130_*"):
         assert (run / "final.dump").exists() == (run / "health.json").exists()
     finished.update({name: (runs / name / "health.json").stat().st_mtime_ns for name in recorded})
 
     subprocess.run([*snakemake_cmd(workflow, U), "--unlock"], capture_output=True, check=True)
-    proc = subprocess.run(snakemake_cmd(workflow, U), capture_output=True, text=True)
+    proc = subprocess.run([*snakemake_cmd(workflow, U), *dataset], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
     spread_jobs = proc.stderr.count("rule spread:") + proc.stdout.count("rule spread:")
     assert 3 - len(written) <= spread_jobs <= 3 - len(recorded)
@@ -266,7 +270,9 @@ def test_a_gap_axis_added_to_the_study_runs_only_its_spreads_to_maps_and_a_recom
     finished = {p.parent.name: p.stat().st_mtime_ns for p in (workflow / "results/smoke/runs").glob("*/health.json")}
     sweep = json.dumps({"U_mm_s": FIRST_U, "omega_rad_s": [-10, 5], "roller.gap_um": [300, 350]})
     maps = json.dumps({"axes": ["U_mm_s", "roller.gap_um"]})           # maps over (U, gap), one set per omega
-    cmd = [*snakemake_cmd(workflow, FIRST_U)[:-1], f"sweep={sweep}", f"maps={maps}"]
+    cmd = [*snakemake_cmd(workflow, FIRST_U)[:-1], f"sweep={sweep}", f"maps={maps}", "--",  # what is checked here
+           *(f"results/smoke/{out}" for out in ("dataset.csv", "surrogate/scores.json", "maps",
+                                                 "runs/roller.gap_um=350/U85_w-10_r0/parameters.yaml"))]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
     log = proc.stderr + proc.stdout
