@@ -151,9 +151,9 @@ def check_kinetic_energy(log: dict, wall_speed: float = 0.0, squeeze_speed: floa
     if fast.any():
         first = np.argmax(fast)
         raise UnstableRunError(f"unsound run: kinetic-energy blow-up, a particle at {vmax[first]:.3g} m/s at step "
-                            f"{int(thermo['Step'].iloc[first])} (limit {limit:.3g} m/s = max({BLOWUP_FLOOR_M_S:g}, "
-                            f"{BLOWUP_SPEED_FACTOR} x the fastest wall's {wall_speed:.3g} m/s, squeeze-out "
-                            f"{squeeze_speed:.3g} m/s)): lower the time step")
+                               f"{int(thermo['Step'].iloc[first])} (limit {limit:.3g} m/s = max({BLOWUP_FLOOR_M_S:g}, "
+                               f"{BLOWUP_SPEED_FACTOR} x the fastest wall's {wall_speed:.3g} m/s, squeeze-out "
+                               f"{squeeze_speed:.3g} m/s)): lower the time step")
     return {"peak_speed_m_s": float(vmax.max(initial=0.0))}
 
 
