@@ -2,7 +2,7 @@
 
 Run from the repository root (no simulation; it reads the fidelity benchmark's runs)::
 
-    .venv/bin/python benchmarks/reference_front.py [--runs stiffness.csv,...,feed_interval.csv]
+    .venv/bin/python benchmarks/reference_front.py [--runs stiffness.csv,...,unfed_dt.csv]
         [--default E2e7] [--name reference_front]
 
 Each CSV is a ``bench_fidelity.py`` run table under ``benchmarks/measured/``. Runs repeated in
@@ -98,7 +98,7 @@ def plot(table: pd.DataFrame, path: Path, default: str) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs",
-                        default="stiffness.csv,stiffness_omega.csv,scene20.csv,feed_interval.csv",
+                        default="stiffness.csv,stiffness_omega.csv,scene20.csv,feed_interval.csv,unfed_dt.csv",
                         help="bench_fidelity run tables under --measured, comma-separated")
     parser.add_argument("--measured", type=Path, default=ROOT / "benchmarks" / "measured")
     parser.add_argument("--renamed", default="E5e6", help="what a variant called `default` in them was")
