@@ -82,6 +82,9 @@ VARIANTS = {
     "E2e7+pile40": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.feed_pile_mg_per_mm": 40,
                     "LEVEL.heap_particles": 3640},
     "E2e7+region6": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.sampling_length_mm": 6.0},
+    # both unconverged knobs turned together: the reference the default is judged against
+    "E2e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 2.5,
+                             "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
     # the feed at the 20 MPa default: top-ups twice as often, and no feed from a heap that lasts
     # (40 mg/mm: the pile's 20 plus the 18 mg/mm forward rolling lays over the 13 mm travel at omega -15)
     "feed0.25": {"LEVEL.feed_every_mm": 0.25},
