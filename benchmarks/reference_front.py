@@ -2,7 +2,7 @@
 
 Run from the repository root (no simulation; it reads the fidelity benchmark's runs)::
 
-    .venv/bin/python benchmarks/reference_front.py [--runs stiffness.csv,...,unfed_dt.csv]
+    .venv/bin/python benchmarks/reference_front.py [--runs stiffness.csv,...,combined.csv]
         [--default E2e7] [--name reference_front]
 
 Each CSV is a ``bench_fidelity.py`` run table under ``benchmarks/measured/``. Runs repeated in
@@ -39,6 +39,7 @@ STEPS = {
     ("E2e7", "feed0.25"): "top-up every 0.5 -> 0.25 mm (20 MPa)",
     ("E2e7", "unfed40"): "fed 20 mg/mm pile -> unfed 40 mg/mm heap (20 MPa)",
     ("dt0.5", "E2e7"): "time step 0.5 -> 0.35 T_R (20 MPa)",
+    ("E2e7", "E2e7+strip2.5+pile40"): "strip 1.2 -> 2.5 mm and pile 20 -> 40 mg/mm (20 MPa)",
 }
 
 
@@ -98,7 +99,7 @@ def plot(table: pd.DataFrame, path: Path, default: str) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs",
-                        default="stiffness.csv,stiffness_omega.csv,scene20.csv,feed_interval.csv,unfed_dt.csv",
+                        default="stiffness.csv,stiffness_omega.csv,scene20.csv,feed_interval.csv,unfed_dt.csv,combined.csv",
                         help="bench_fidelity run tables under --measured, comma-separated")
     parser.add_argument("--measured", type=Path, default=ROOT / "benchmarks" / "measured")
     parser.add_argument("--renamed", default="E5e6", help="what a variant called `default` in them was")
