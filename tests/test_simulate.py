@@ -1,7 +1,6 @@
 """Real LIGGGHTS runs: the smoke scene settles and spreads, the material
 reaches the engine in the right units, and failures are loud."""
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -284,8 +283,8 @@ def test_killed_spread_resumes_from_its_newest_checkpoint(smoke, config):
     assert whole(resumed) == whole(smoke["spread"]) and resumed["lost"] == 0
     # the resumed state is the uninterrupted run's: one top-up later the pile ahead of the roller has
     # the same mass (0.1-0.5 % measured; a run's chaos takes longer to grow than one top-up interval)
-    pile = lambda log: {int(k): float(v) for k, v in re.findall(r"^spreadmap feed_pile_kg_(\d+) (\S+)$",  # noqa: E731
-                                                                log.read_text(), re.M)}
+    pile = lambda log: {int(k.rsplit("_", 1)[1]): float(v)  # noqa: E731
+                        for k, v in read_log(log.read_text())["printed"].items() if k.startswith("feed_pile_kg_")}
     after, whole_run = pile(out / "spread.log"), pile(root / "run" / "spread.log")
     first = min(after)
     assert first > resumed["resumed_from_step"] and after[first] == pytest.approx(whole_run[first], rel=0.02)
