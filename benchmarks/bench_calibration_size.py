@@ -4,11 +4,13 @@ Usage::
 
     .venv/bin/python benchmarks/bench_calibration_size.py [--level default] [--seeds 0,1,2]
         [--repose 2,3,4,5,6] [--cups 1.5,2,2.5,3] [--name calibration_size] [--append]
+        [--set material.rolling_friction=0.556 ...]
 
 Runs the angle-of-repose heap on each base diameter [mm] and the bulk-density cup on each
 diameter (= height) [mm] with the config's material and the level's PSD, one packing per seed
 index, one LIGGGHTS at a time, and appends a row per run to ``benchmarks/measured/<name>.csv`` as
-it finishes (``--append`` keeps the rows already there, so an invocation may add seeds or sizes);
+it finishes (``--append`` keeps the rows already there, so an invocation may add seeds or sizes;
+``--set`` overrides a config key, dotted, its value read as YAML);
 ``<name>.md`` summarises every row: mean and seed sd per size, wall time. A size is big enough
 when the means of it and of every bigger size agree within the seed sd (docs/calibration.md).
 """
@@ -22,6 +24,7 @@ import time
 from pathlib import Path
 
 import pandas as pd
+import yaml
 
 from analysis.calibration.characterise import bulk_density_test, repose_test
 from analysis.config.load import load_config
@@ -38,6 +41,25 @@ def _ints(text):
     return [int(v) for v in text.split(",") if v]
 
 
+def override(config: dict, assignments: list[str]) -> dict:
+    """``config`` with each ``dotted.key=value`` applied (the value read as YAML); a key that is
+    not in the config is refused with its name."""
+    for item in assignments:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise SystemExit(f"--set {item!r}: expected dotted.key=value")
+        node, *path = key.split(".")
+        target = config
+        for part in [node, *path[:-1]]:
+            if not isinstance(target, dict) or part not in target:
+                raise SystemExit(f"--set {item!r}: no key {part!r} in the config")
+            target = target[part]
+        if path and path[-1] not in target or not path and node not in config:
+            raise SystemExit(f"--set {item!r}: no key {key!r} in the config")
+        target[path[-1] if path else node] = yaml.safe_load(value)
+    return config
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--level", default="default")
@@ -47,8 +69,10 @@ def main(argv=None) -> int:
     p.add_argument("--name", default="calibration_size")
     p.add_argument("--append", action="store_true")
     p.add_argument("--note", default="", help="a line for the summary (e.g. how its rows were run)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config key, e.g. material.rolling_friction=0.556")
     a = p.parse_args(argv)
-    config = load_config(PROJECT_DIR / "config.yaml")
+    config = load_config(override(load_config(PROJECT_DIR / "config.yaml"), a.set))
     csv = OUT / f"{a.name}.csv"
     OUT.mkdir(parents=True, exist_ok=True)
     if not a.append and csv.exists():

@@ -22,3 +22,17 @@ def test_a_benchmark_imports_and_parses_its_command_line(name, capsys):
         main(["--help"])
     assert done.value.code == 0
     assert "usage:" in capsys.readouterr().out
+
+
+def test_the_calibration_size_benchmark_overrides_a_key_and_refuses_an_unknown_one():
+    """``bench_calibration_size.py --set``: a dotted key's value is read as YAML; a key the config
+    does not have is refused with its name, before any LIGGGHTS starts."""
+    from benchmarks.bench_calibration_size import override
+
+    config = {"material": {"rolling_friction": 0.1, "sliding_friction_particle": 0.5}}
+    assert override(config, ["material.rolling_friction=0.556"])["material"] == {
+        "rolling_friction": 0.556, "sliding_friction_particle": 0.5}
+    with pytest.raises(SystemExit, match="material.rolling'"):
+        override(config, ["material.rolling=0.3"])
+    with pytest.raises(SystemExit, match="dotted.key=value"):
+        override(config, ["material.rolling_friction"])
