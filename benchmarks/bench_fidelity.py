@@ -85,6 +85,11 @@ VARIANTS = {
     # both unconverged knobs turned together: the reference the default is judged against
     "E2e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 2.5,
                              "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
+    # the width one step past the 2.5 mm strip (28 mean diameters), the pile's 20 mg/mm over 5 mm
+    "E2e7+strip5": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 5.0,
+                    "LEVEL.heap_particles": 7580},
+    # the gap as built: a 180-facet roller (sagitta 2.3 um) against the default 90 (sagitta 9.1 um)
+    "facets180": {"roller.facets_around": 180},
     # the feed at the 20 MPa default: top-ups twice as often, and no feed from a heap that lasts
     # (40 mg/mm: the pile's 20 plus the 18 mg/mm forward rolling lays over the 13 mm travel at omega -15)
     "feed0.25": {"LEVEL.feed_every_mm": 0.25},
