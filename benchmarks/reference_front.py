@@ -40,6 +40,9 @@ STEPS = {
     ("E2e7", "unfed40"): "fed 20 mg/mm pile -> unfed 40 mg/mm heap (20 MPa)",
     ("dt0.5", "E2e7"): "time step 0.5 -> 0.35 T_R (20 MPa)",
     ("E2e7", "E2e7+strip2.5+pile40"): "strip 1.2 -> 2.5 mm and pile 20 -> 40 mg/mm (20 MPa)",
+    ("E2e7+strip2.5", "E2e7+strip5"): "strip 2.5 -> 5 mm (20 MPa)",
+    ("E2e7", "E2e7+strip5"): "strip 1.2 -> 5 mm (20 MPa)",
+    ("E2e7", "facets180"): "roller facets 90 -> 180: the gap as built (20 MPa)",
 }
 
 
@@ -99,7 +102,8 @@ def plot(table: pd.DataFrame, path: Path, default: str) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs",
-                        default="stiffness.csv,stiffness_omega.csv,scene20.csv,feed_interval.csv,unfed_dt.csv,combined.csv",
+                        default="stiffness.csv,stiffness_omega.csv,scene20.csv,feed_interval.csv,unfed_dt.csv,combined.csv,"
+                                "strip5.csv,facets180.csv",
                         help="bench_fidelity run tables under --measured, comma-separated")
     parser.add_argument("--measured", type=Path, default=ROOT / "benchmarks" / "measured")
     parser.add_argument("--renamed", default="E5e6", help="what a variant called `default` in them was")
