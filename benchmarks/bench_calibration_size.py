@@ -29,6 +29,7 @@ import yaml
 from analysis.calibration.characterise import bulk_density_test, repose_test
 from analysis.config.load import load_config
 from analysis.config.reading import PROJECT_DIR
+from analysis.config.sweep import config_value, resolve
 
 OUT = PROJECT_DIR / "benchmarks" / "measured"
 
@@ -42,22 +43,19 @@ def _ints(text):
 
 
 def override(config: dict, assignments: list[str]) -> dict:
-    """``config`` with each ``dotted.key=value`` applied (the value read as YAML); a key that is
-    not in the config is refused with its name."""
+    """A copy of ``config`` with each ``dotted.key=value`` applied (the value read as YAML; set as the
+    sweep sets its axes, :func:`analysis.config.sweep.resolve`); a key the config lacks is refused."""
+    values = {}
     for item in assignments:
         key, sep, value = item.partition("=")
         if not sep:
             raise SystemExit(f"--set {item!r}: expected dotted.key=value")
-        node, *path = key.split(".")
-        target = config
-        for part in [node, *path[:-1]]:
-            if not isinstance(target, dict) or part not in target:
-                raise SystemExit(f"--set {item!r}: no key {part!r} in the config")
-            target = target[part]
-        if path and path[-1] not in target or not path and node not in config:
+        *path, last = key.split(".")
+        parent = config_value(config, ".".join(path)) if path else config
+        if not isinstance(parent, dict) or last not in parent:
             raise SystemExit(f"--set {item!r}: no key {key!r} in the config")
-        target[path[-1] if path else node] = yaml.safe_load(value)
-    return config
+        values[key] = yaml.safe_load(value)
+    return resolve(config, values)
 
 
 def main(argv=None) -> int:
