@@ -2,7 +2,7 @@
 # characterisation tests (angle of repose, bulk density) over a design of contact coefficients,
 # fits the surrogate, solves for the coefficients that reproduce calibration.measured, writes them
 # as a config file for --configfile and a report page, and re-runs them with new seeds.
-from analysis.calibration.calibrate import CalibrationError, check_calibration, design_run
+from analysis.calibration.calibrate import CalibrationError, calibration_run, check_calibration, heap_bases_mm
 from analysis.calibration.calibrate import design as calibration_design
 from analysis.calibration.calibrate import tests_needed as calibration_tests
 
@@ -17,8 +17,11 @@ CAL_DESIGN = calibration_design(CAL_CONFIG) if CAL_CONFIG else None
 CAL_TESTS = calibration_tests(CAL_CONFIG) if CAL_CONFIG else []
 CAL_REPLICATES = CAL_CONFIG.get("replicates", 1)
 CAL_RUNS = [] if CAL_DESIGN is None else [f"{p}_r{r}" for r in range(CAL_REPLICATES) for p in CAL_DESIGN.index]
-# what a test run depends on besides its coefficients and seeds: a change re-runs it
-CAL_TEST_KEYS = ("level", "repose_base_diameter_mm", "cup_diameter_mm", "cup_height_mm", "max_time_s")
+CAL_CALIBRATED = f"{CAL}/calibrated.yaml"
+# the heap's bases (mm): with two or more, the angle is the large-heap limit of their size trend
+CAL_HEAP_BASES = [f"{d:g}" for d in heap_bases_mm(CAL_CONFIG)] if CAL_CONFIG else []
+# what a test run depends on besides its coefficients, seeds and heap base: a change re-runs it
+CAL_TEST_KEYS = ("level", "cup_diameter_mm", "cup_height_mm", "max_time_s")
 # the tests' physics (material, PSD, time step, seeds): a change re-runs them
 CAL_PHYSICS = (
     simulation_fingerprint(
@@ -34,29 +37,64 @@ CAL_PHYSICS = (
 wildcard_constraints:
     calrun=r"p\d+_r\d+",
     caltest="repose|bulk_density",
-    check=r"r\d+",
+    calset=r"runs/p\d+_r\d+|check/r\d+",
+    base=r"\d+(\.\d+)?",
 
 
 localrules:
+    calibration_angle,
     calibration_fit,
     calibration_report,
     calibrate,
 
 
-rule calibration_test:
-    """One characterisation test (repose heap or bulk-density cup) at one design point and replicate."""
+rule calibration_cup:
+    """The bulk-density cup of one design run or check."""
+    input:
+        lambda w: CAL_CALIBRATED if w.calset.startswith("check/") else [],
     output:
-        f"{CAL}/runs/{{calrun}}/{{caltest}}/{{caltest}}.json",
+        f"{CAL}/{{calset}}/bulk_density/bulk_density.json",
     log:
-        f"results/logs/calibration/{{calrun}}_{{caltest}}.log",
+        f"results/logs/calibration/{{calset}}_bulk_density.log",
     benchmark:
-        f"results/benchmarks/calibration/{{calrun}}_{{caltest}}.tsv"
+        f"results/benchmarks/calibration/{{calset}}_bulk_density.tsv"
     params:
-        run=lambda w: design_run(CAL_DESIGN, w.calrun),
+        run=lambda w: calibration_run(CAL_DESIGN, CAL_REPLICATES, w.calset),
         physics=CAL_PHYSICS,
         calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_TEST_KEYS},
     script:
         "../scripts/calibration_test.py"
+
+
+rule calibration_heap:
+    """The angle-of-repose heap of one design run or check on one base."""
+    input:
+        lambda w: CAL_CALIBRATED if w.calset.startswith("check/") else [],
+    output:
+        f"{CAL}/{{calset}}/repose/d{{base}}/repose.json",
+    log:
+        f"results/logs/calibration/{{calset}}_repose_d{{base}}.log",
+    benchmark:
+        f"results/benchmarks/calibration/{{calset}}_repose_d{{base}}.tsv"
+    params:
+        run=lambda w: calibration_run(CAL_DESIGN, CAL_REPLICATES, w.calset),
+        physics=CAL_PHYSICS,
+        calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_TEST_KEYS},
+    script:
+        "../scripts/calibration_test.py"
+
+
+rule calibration_angle:
+    """A run's angle of repose from its heaps: the large-heap limit of their size trend (one base: its angle)."""
+    input:
+        lambda w: expand(f"{CAL}/{w.calset}/repose/d{{base}}/repose.json", base=CAL_HEAP_BASES),
+    output:
+        json=f"{CAL}/{{calset}}/repose/repose.json",
+        image=f"{CAL}/{{calset}}/repose/repose.png",
+    log:
+        f"results/logs/calibration/{{calset}}_repose.log",
+    script:
+        "../scripts/calibration_angle.py"
 
 
 rule calibration_fit:
@@ -64,7 +102,7 @@ rule calibration_fit:
     input:
         expand(f"{CAL}/runs/{{calrun}}/{{caltest}}/{{caltest}}.json", calrun=CAL_RUNS, caltest=CAL_TESTS),
     output:
-        config=f"{CAL}/calibrated.yaml",
+        config=CAL_CALIBRATED,
         solution=f"{CAL}/solution.json",
         results=f"{CAL}/results.csv",
         surfaces=f"{CAL}/response_surfaces.png",
@@ -76,25 +114,6 @@ rule calibration_fit:
         gp_restarts=CONFIG["surrogate"]["gp_restarts"],
     script:
         "../scripts/calibration_fit.py"
-
-
-rule calibration_check:
-    """One characterisation test at the calibrated coefficients with new seeds."""
-    input:
-        calibrated=rules.calibration_fit.output.config,
-    output:
-        f"{CAL}/check/{{check}}/{{caltest}}/{{caltest}}.json",
-    log:
-        f"results/logs/calibration/check_{{check}}_{{caltest}}.log",
-    params:
-        run=lambda w: {
-            "coefficients": None,
-            "seed_index": CAL_REPLICATES * len(CAL_DESIGN) + int(w.check[1:]),
-        },
-        physics=CAL_PHYSICS,
-        calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_TEST_KEYS},
-    script:
-        "../scripts/calibration_test.py"
 
 
 rule calibration_report:

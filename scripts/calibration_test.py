@@ -1,5 +1,5 @@
-"""Snakemake entry: one characterisation test (repose heap or bulk-density cup) of the virtual
-powder at a design point's coefficients, or at the calibrated ones (the check with new seeds)."""
+"""Snakemake entry: one characterisation test (a repose heap on one base, or the bulk-density cup)
+of the virtual powder at a design point's coefficients, or at the calibrated ones (the check with new seeds)."""
 from pathlib import Path
 
 import yaml
@@ -11,12 +11,12 @@ from analysis.rule import rule_context
 with rule_context(snakemake) as config:
     cal, run = snakemake.params.calibration, snakemake.params.run
     coefficients = run["coefficients"]
-    if coefficients is None:  # the check: the calibrated config file's coefficients
-        coefficients = yaml.safe_load(Path(snakemake.input.calibrated).read_text())["material"]
+    if coefficients is None:  # a check: the calibrated config file's coefficients
+        coefficients = yaml.safe_load(Path(snakemake.input[0]).read_text())["material"]
     config = with_coefficients(config, coefficients)
     out = Path(snakemake.output[0]).parent
-    if snakemake.wildcards.caltest == "repose":
-        repose_test(config, cal["level"], out, cal["repose_base_diameter_mm"], run["seed_index"], cal["max_time_s"])
+    if snakemake.rule == "calibration_heap":
+        repose_test(config, cal["level"], out, float(snakemake.wildcards.base), run["seed_index"], cal["max_time_s"])
     else:
         bulk_density_test(config, cal["level"], out, cal["cup_diameter_mm"], cal["cup_height_mm"], run["seed_index"],
                           cal["max_time_s"])

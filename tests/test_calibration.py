@@ -15,13 +15,16 @@ import yaml
 from analysis.calibration.calibrate import (
     CalibrationError,
     calibrated_config,
+    calibration_run,
     check_calibration,
+    collect_results,
     design,
     fit_responses,
+    heap_bases_mm,
     solve,
     targets,
 )
-from analysis.calibration.characterise import base_disk, cup_density, heap_angle
+from analysis.calibration.characterise import base_disk, cup_density, heap_angle, large_heap_angle, repose_over_sizes
 from analysis.config.load import load_config
 from analysis.dem.liggghts import LiggghtsError
 from tests.test_config import ROOT
@@ -137,6 +140,50 @@ def test_calibration_config_checks():
     with pytest.raises(CalibrationError, match="no measurement"):
         check_calibration(none)
     assert set(targets(CONFIG["calibration"])) <= {"angle_of_repose_deg", "bulk_density_kg_m3"}
+    twice = {**CONFIG, "calibration": _cal(repose_base_diameter_mm=[5, 8, 5])}
+    with pytest.raises(CalibrationError, match=r"repose_base_diameter_mm' = \[5.0, 8.0, 5.0\]: a base is given twice"):
+        check_calibration(twice)
+    assert heap_bases_mm(_cal(repose_base_diameter_mm=5)) == [5.0]
+    assert heap_bases_mm(_cal(repose_base_diameter_mm=[5, 8])) == [5.0, 8.0]
+
+
+def test_large_heap_angle_recovers_the_size_trend():
+    """angle = a + b / D: two bases give a and b exactly, three a least-squares fit (several series at
+    once); one base passes its angle; two equal bases are refused."""
+    a, b = np.array([37.0, 30.0]), np.array([-59.6, -30.0])
+    d = np.array([5.0, 8.0, 10.0])
+    angles = a + b / d[:, None]
+    fit = large_heap_angle(d[:2], angles[:2])
+    assert fit["angle_deg"] == pytest.approx(a) and fit["size_slope_deg_mm"] == pytest.approx(b)
+    noisy = angles + np.array([[0.3, -0.3], [-0.3, 0.3], [0.1, 0.0]])
+    fit3 = large_heap_angle(d, noisy)
+    assert fit3["angle_deg"] == pytest.approx(a, abs=2.0) and not np.allclose(fit3["angle_deg"], a, atol=1e-6)
+    assert large_heap_angle([5.0], [25.1])["angle_deg"] == 25.1
+    assert np.isnan(large_heap_angle([5.0], [25.1])["size_slope_deg_mm"])
+    with pytest.raises(ValueError, match="two different bases"):
+        large_heap_angle([5.0, 5.0], [25.0, 26.0])
+    # a single run's seed sd s becomes s sqrt(D1^2 + D2^2) / (D2 - D1) in a: 3.1 s for 5 and 8 mm
+    rng = np.random.default_rng(0)
+    sample = large_heap_angle([5.0, 8.0], 30.0 + rng.normal(0.0, 1.0, (2, 20000)))["angle_deg"]
+    assert np.std(sample) == pytest.approx(np.sqrt(89) / 3, rel=0.03)
+
+
+def test_calibration_results_carry_the_heaps_behind_a_large_heap_angle(tmp_path):
+    """A run's heaps on two bases become its large-heap angle (results.csv: the angle and each base's)."""
+    cal = _cal(coefficients={"rolling_friction": [0.05, 0.6], "sliding_friction_particle": None}, design_points=3)
+    paths = []
+    for i, point in enumerate(design(cal).index):
+        heaps = [{"base_diameter_mm": d, "angle_of_repose_deg": 37.0 - 60.0 / d + i, "wall_s": 10.0, "cpu_s": 9.0,
+                  "particles": 100} for d in (5.0, 8.0)]
+        path = tmp_path / f"{point}_r0" / "repose" / "repose.json"
+        path.parent.mkdir(parents=True)
+        path.write_text(json.dumps(repose_over_sizes(heaps)))
+        paths.append(path)
+    results = collect_results(cal, paths)
+    assert results["angle_of_repose_deg"].to_numpy() == pytest.approx([37.0, 38.0, 39.0])
+    assert results["angle_d5_deg"].to_numpy() == pytest.approx([25.0, 26.0, 27.0])
+    assert results["angle_d8_deg"].to_numpy() == pytest.approx([29.5, 30.5, 31.5])
+    assert json.loads(paths[0].read_text())["cpu_s"] == 18.0
 
 
 # --- real LIGGGHTS, smoke size: the workflow recovers a known rolling friction --------------------
@@ -209,4 +256,31 @@ def test_unreachable_angle_is_refused_by_the_workflow(calibrated):
     assert proc.returncode != 0
     assert re.search(r"angle_of_repose_deg 75 deg \+- 1 deg cannot be reached: .* gives [\d.]+ deg to [\d.]+ deg",
                      proc.stderr), proc.stderr[-3000:]
-    assert "calibration_test" not in re.findall(r"rule (\w+):", proc.stdout + proc.stderr)
+    ran = re.findall(r"rule (\w+):", proc.stdout + proc.stderr)
+    assert not {"calibration_heap", "calibration_cup", "calibration_angle"} & set(ran), ran
+
+
+def test_two_heap_bases_run_every_heap_and_combine_them(tmp_path):
+    """A dry run of `snakemake calibrate` with heaps on two bases: each design run and check runs
+    both heaps (and one cup) and one calibration_angle combines them."""
+    override = tmp_path / "bases.yaml"
+    override.write_text(yaml.safe_dump({"calibration": {**SMOKE_CALIBRATION, "repose_base_diameter_mm": [2, 2.5],
+                                                        "check_replicates": 1}}))
+    proc = subprocess.run([sys.executable, "-m", "snakemake", "calibrate", "-n", "--cores", "1", "-d", str(tmp_path),
+                           "-s", str(ROOT / "Snakefile"), "--configfile", str(ROOT / "config.yaml"), str(override)],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    counts = dict(re.findall(r"^(calibration_\w+)\s+(\d+)$", proc.stdout, re.M))
+    runs = SMOKE_CALIBRATION["design_points"] + 1   # the design runs and one check
+    assert counts == {"calibration_heap": str(2 * runs), "calibration_cup": str(runs),
+                      "calibration_angle": str(runs), "calibration_fit": "1", "calibration_report": "1"}, proc.stdout
+    assert "repose/d2.5/repose.json" in proc.stdout and "check/r0/repose/d2/repose.json" in proc.stdout
+
+
+def test_checks_take_seeds_no_design_run_uses():
+    table = design(_cal(design_points=4))
+    runs = [calibration_run(table, 2, f"runs/p{i:02d}_r{r}") for r in range(2) for i in range(4)]
+    checks = [calibration_run(table, 2, f"check/r{r}") for r in range(3)]
+    assert sorted(r["seed_index"] for r in runs) == list(range(8))
+    assert [c["seed_index"] for c in checks] == [8, 9, 10] and all(c["coefficients"] is None for c in checks)
+    assert runs[5]["coefficients"] == table.loc["p01"].to_dict()

@@ -59,6 +59,18 @@ def check_calibration(config: dict) -> None:
                                    "the range must have hi > lo")
     if not targets(cal):
         raise CalibrationError("config key 'calibration.measured': no measurement given (both values are null)")
+    bases = heap_bases_mm(cal)
+    if len(set(bases)) != len(bases):
+        raise CalibrationError(f"config key 'calibration.repose_base_diameter_mm' = {bases}: a base is "
+                               "given twice; give one base, or two or more different ones (mm)")
+
+
+def heap_bases_mm(cal: dict) -> list[float]:
+    """The angle-of-repose heap's base diameters [mm]: ``repose_base_diameter_mm``, one value or a
+    list (two or more: the angle is the large-heap limit of their size trend,
+    :func:`analysis.calibration.characterise.large_heap_angle`)."""
+    bases = cal["repose_base_diameter_mm"]
+    return [float(b) for b in (bases if isinstance(bases, list) else [bases])]
 
 
 def coefficient_bounds(cal: dict) -> dict[str, tuple[float, float]]:
@@ -97,6 +109,16 @@ def design_run(table: pd.DataFrame, run: str) -> dict:
     point, rep = run.split("_r")
     return {"coefficients": table.loc[point].to_dict(),
             "seed_index": int(rep) * len(table) + table.index.get_loc(point)}
+
+
+def calibration_run(table: pd.DataFrame, replicates: int, calset: str) -> dict:
+    """Coefficients and seed index of a design run (``runs/p<i>_r<rep>``, :func:`design_run` of the
+    design ``table``) or of a check (``check/r<rep>``: the calibrated config file's coefficients,
+    ``None`` here, with seeds no design run of ``replicates`` per point uses)."""
+    group, name = calset.split("/")
+    if group == "runs":
+        return design_run(table, name)
+    return {"coefficients": None, "seed_index": replicates * len(table) + int(name[1:])}
 
 
 def with_coefficients(config: dict, coefficients: dict) -> dict:
@@ -236,13 +258,16 @@ def calibrated_config(solution: dict, source: str = "") -> str:
 
 
 def _test_results(paths: list) -> pd.DataFrame:
-    """One row per run folder (``<run>/<test>/<test>.json``), a column per measured property."""
+    """One row per run folder (``<run>/<test>/<test>.json``), a column per measured property (and,
+    for a large-heap angle, ``angle_d<D>_deg`` per heap base D [mm])."""
     rows = {}
     for path in paths:
         path = Path(path)
         result = json.loads(path.read_text())
         row = rows.setdefault(path.parent.parent.name, {})
         row.update({prop: result[prop] for prop in PROPERTIES if prop in result})
+        if result.get("extrapolated"):  # the heaps behind a large-heap angle, by base
+            row.update({f"angle_d{d:g}_deg": a for d, a in zip(result["base_diameters_mm"], result["angles_deg"])})
     return pd.DataFrame.from_dict(rows, orient="index")
 
 

@@ -152,6 +152,39 @@ def heap_angle(x, y, z, radius, base_radius: float, bin_width: float, sectors: i
             "height_m": float(top[np.isfinite(top)].max()), "particles_on_base": int(on.sum())}
 
 
+def large_heap_angle(base_diameters_mm, angles_deg) -> dict:
+    """Angle of repose [deg] of a heap too large for its apex and toe to matter, from heaps on
+    several bases: the intercept ``a`` of the least-squares line ``angle = a + b / D`` (D the base's
+    diameter [mm], ``b`` [deg mm]; docs/calibration.md: How big the tests must be).
+
+    ``angles_deg`` has one entry per size in ``base_diameters_mm`` (or shape (n_sizes, n) for n
+    series at once). With one size, ``a`` is that heap's angle and ``b`` is nan. With two, the
+    line passes through both and a single run's seed sd s becomes
+    ``s sqrt(D1^2 + D2^2) / (D2 - D1)`` in ``a`` (3.1 s for 5 and 8 mm).
+    """
+    d = np.asarray(base_diameters_mm, float)
+    angles = np.asarray(angles_deg, float)
+    if d.size == 1:
+        return {"angle_deg": angles[0], "size_slope_deg_mm": np.full(angles.shape[1:], np.nan)}
+    if np.unique(d).size < 2:
+        raise ValueError(f"heaps on bases {d.tolist()} mm: the angle's size trend needs two different bases")
+    slope, intercept = np.polyfit(1.0 / d, angles, 1)
+    return {"angle_deg": intercept, "size_slope_deg_mm": slope}
+
+
+def repose_over_sizes(results: list[dict]) -> dict:
+    """The angle of repose of one calibration run from its heaps on one or more bases (each a
+    :func:`repose_test` result): :func:`large_heap_angle` of them, the heaps' own angles by base,
+    their summed cost."""
+    d = [r["base_diameter_mm"] for r in results]
+    angles = [r["angle_of_repose_deg"] for r in results]
+    fit = large_heap_angle(d, angles)
+    return {"angle_of_repose_deg": float(fit["angle_deg"]), "size_slope_deg_mm": float(fit["size_slope_deg_mm"]),
+            "extrapolated": len(set(d)) > 1, "base_diameters_mm": d, "angles_deg": angles,
+            **{k: float(sum(r[k] for r in results)) for k in ("wall_s", "cpu_s")},
+            "particles": int(sum(r["particles"] for r in results))}
+
+
 def plot_heap(atoms, base_radius: float, fit: dict, path: Path) -> None:
     """Side view of the heap (distance from the axis against height) with its fitted surface line."""
     import matplotlib

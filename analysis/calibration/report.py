@@ -91,6 +91,15 @@ def check_table(checks: pd.DataFrame, solution: dict) -> tuple[list[str], bool]:
     return rows, passed
 
 
+def _heap_note(results: pd.DataFrame) -> str:
+    """What the angle of repose is when it comes from heaps on several bases (``angle_d<D>_deg`` columns)."""
+    bases = [c[len("angle_d"):-len("_deg")] for c in results.columns if c.startswith("angle_d")]
+    if not bases:
+        return ""
+    return (f" The angle of repose is the large-heap limit a of angle = a + b / D fitted to each run's heaps "
+            f"on bases of {', '.join(bases)} mm (their own angles in the table's `angle_d<D>_deg`).")
+
+
 def report_markdown(solution: dict, results: pd.DataFrame, responses: dict, checks: pd.DataFrame | None,
                     images: dict, level: str) -> str:
     """The report page (Markdown) of one calibration."""
@@ -98,7 +107,7 @@ def report_markdown(solution: dict, results: pd.DataFrame, responses: dict, chec
     lines = ["# Calibration of the virtual powder", "",
              f"Characterisation tests at the `{level}` level's PSD and time step; "
              f"{results['point'].nunique()} design points x {results['replicate'].nunique()} replicate(s) "
-             f"(docs/calibration.md).", "", "## Measured and calibrated", "",
+             f"(docs/calibration.md).{_heap_note(results)}", "", "## Measured and calibrated", "",
              "| property | measured | calibrated powder (model) | reachable over the box |", "|---|---|---|---|"]
     for prop, m in solution["measured"].items():
         unit = PROPERTIES[prop][2]
