@@ -284,3 +284,15 @@ def test_checks_take_seeds_no_design_run_uses():
     assert sorted(r["seed_index"] for r in runs) == list(range(8))
     assert [c["seed_index"] for c in checks] == [8, 9, 10] and all(c["coefficients"] is None for c in checks)
     assert runs[5]["coefficients"] == table.loc["p01"].to_dict()
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "calibration").glob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_calibrated_powders_are_valid_configfiles(path):
+    """Every calibrated powder in calibration/ merges into config.yaml as a valid --configfile, and
+    changes nothing but material coefficients within the calibrated box."""
+    overlay = yaml.safe_load(path.read_text())
+    assert set(overlay) == {"material"}
+    load_config({**CONFIG, "material": {**CONFIG["material"], **overlay["material"]}})
+    for name, value in overlay["material"].items():
+        lo, hi = CONFIG["calibration"]["coefficients"][name]
+        assert lo <= value <= hi, (name, value)
