@@ -103,7 +103,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs",
                         default="stiffness.csv,stiffness_omega.csv,scene20.csv,feed_interval.csv,unfed_dt.csv,combined.csv,"
-                                "strip5.csv,facets180.csv",
+                                "strip5.csv,facets180.csv,pile40_w10.csv",
                         help="bench_fidelity run tables under --measured, comma-separated")
     parser.add_argument("--measured", type=Path, default=ROOT / "benchmarks" / "measured")
     parser.add_argument("--renamed", default="E5e6", help="what a variant called `default` in them was")
