@@ -20,8 +20,9 @@ CAL_RUNS = [] if CAL_DESIGN is None else [f"{p}_r{r}" for r in range(CAL_REPLICA
 CAL_CALIBRATED = f"{CAL}/calibrated.yaml"
 # the heap's bases (mm): with two or more, the angle is the large-heap limit of their size trend
 CAL_HEAP_BASES = [f"{d:g}" for d in heap_bases_mm(CAL_CONFIG)] if CAL_CONFIG else []
-# what a test run depends on besides its coefficients, seeds and heap base: a change re-runs it
-CAL_TEST_KEYS = ("level", "cup_diameter_mm", "cup_height_mm", "max_time_s")
+# what a heap (besides its coefficients, seeds and base) and a cup depend on: a change re-runs them
+CAL_HEAP_KEYS = ("level", "max_time_s")
+CAL_CUP_KEYS = ("level", "cup_diameter_mm", "cup_height_mm", "max_time_s")
 # the tests' physics (material, PSD, time step, seeds): a change re-runs them
 CAL_PHYSICS = (
     simulation_fingerprint(
@@ -35,8 +36,6 @@ CAL_PHYSICS = (
 
 
 wildcard_constraints:
-    calrun=r"p\d+_r\d+",
-    caltest="repose|bulk_density",
     calset=r"runs/p\d+_r\d+|check/r\d+",
     base=r"\d+(\.\d+)?",
 
@@ -61,7 +60,7 @@ rule calibration_cup:
     params:
         run=lambda w: calibration_run(CAL_DESIGN, CAL_REPLICATES, w.calset),
         physics=CAL_PHYSICS,
-        calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_TEST_KEYS},
+        calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_CUP_KEYS},
     script:
         "../scripts/calibration_test.py"
 
@@ -79,7 +78,7 @@ rule calibration_heap:
     params:
         run=lambda w: calibration_run(CAL_DESIGN, CAL_REPLICATES, w.calset),
         physics=CAL_PHYSICS,
-        calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_TEST_KEYS},
+        calibration=lambda w: {k: CAL_CONFIG[k] for k in CAL_HEAP_KEYS},
     script:
         "../scripts/calibration_test.py"
 
