@@ -184,6 +184,10 @@ def test_calibration_results_carry_the_heaps_behind_a_large_heap_angle(tmp_path)
     assert results["angle_d5_deg"].to_numpy() == pytest.approx([25.0, 26.0, 27.0])
     assert results["angle_d8_deg"].to_numpy() == pytest.approx([29.5, 30.5, 31.5])
     assert json.loads(paths[0].read_text())["cpu_s"] == 18.0
+    one = repose_over_sizes([{"base_diameter_mm": 5.0, "angle_of_repose_deg": 25.0, "wall_s": 1.0, "cpu_s": 1.0,
+                              "particles": 10}])
+    assert one["angle_of_repose_deg"] == 25.0 and one["size_slope_deg_mm"] is None and not one["extrapolated"]
+    json.loads(json.dumps(one), parse_constant=lambda c: pytest.fail(f"{c} in the JSON"))
 
 
 # --- real LIGGGHTS, smoke size: the workflow recovers a known rolling friction --------------------

@@ -178,9 +178,10 @@ def repose_over_sizes(results: list[dict]) -> dict:
     their summed cost."""
     d = [r["base_diameter_mm"] for r in results]
     angles = [r["angle_of_repose_deg"] for r in results]
-    fit = large_heap_angle(d, angles)
-    return {"angle_of_repose_deg": float(fit["angle_deg"]), "size_slope_deg_mm": float(fit["size_slope_deg_mm"]),
-            "extrapolated": len(set(d)) > 1, "base_diameters_mm": d, "angles_deg": angles,
+    fit, extrapolated = large_heap_angle(d, angles), len(set(d)) > 1
+    return {"angle_of_repose_deg": float(fit["angle_deg"]),   # no slope of one base: null, not JSON-invalid NaN
+            "size_slope_deg_mm": float(fit["size_slope_deg_mm"]) if extrapolated else None,
+            "extrapolated": extrapolated, "base_diameters_mm": d, "angles_deg": angles,
             **{k: float(sum(r[k] for r in results)) for k in ("wall_s", "cpu_s")},
             "particles": int(sum(r["particles"] for r in results))}
 
