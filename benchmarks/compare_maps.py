@@ -3,14 +3,16 @@
 Run from the repository root (no simulation; it reads two finished maps' datasets)::
 
     .venv/bin/python benchmarks/compare_maps.py OLD/dataset.csv NEW/dataset.csv \
-        [--labels "5 MPa,20 MPa"] [--noise benchmarks/measured/noise_default.csv | --noise RUNS.csv
-        --noise-variant NAME] [--name maps_compared]
+        [--labels "5 MPa,20 MPa"] [--old-variant NAME] [--noise benchmarks/measured/noise_default.csv |
+        --noise RUNS.csv --noise-variant NAME] [--name maps_compared]
 
 For each of the four metrics and each group of points (all, omega < 0, omega = 0, omega > 0): the
 mean of each map over the points both ran, the mean relative change ``100 (new - old) / old`` per
 point, and the mean absolute change in the pooled seed sd of ``--noise`` (optional: a noise-floor
 CSV with ``<metric>_sd`` columns per point, or a ``bench_fidelity`` run table and the variant whose
-seeds give it; its sampling region should be the maps'). Writes ``benchmarks/measured/<name>.csv`` and ``.md``.
+seeds give it; its sampling region should be the maps'). With ``--old-variant``, OLD is such a run table
+and that variant's seed means per point stand for the old map (only the points it ran are compared).
+Writes ``benchmarks/measured/<name>.csv`` and ``.md``.
 """
 from __future__ import annotations
 
@@ -38,15 +40,22 @@ def point_means(dataset: pd.DataFrame) -> pd.DataFrame:
     return dataset.groupby(KEYS)[list(METRICS)].mean()
 
 
+def variant_runs(runs: pd.DataFrame, variant: str) -> pd.DataFrame:
+    """The finished runs of one variant of a ``bench_fidelity`` run table."""
+    if "variant" not in runs:
+        raise ValueError("not a bench_fidelity run table (no 'variant' column)")
+    picked = runs[(runs["variant"] == variant) & (runs["error"].isna() if "error" in runs else True)]
+    if picked.empty:
+        raise ValueError(f"no runs of variant {variant!r} in the run table")
+    return picked
+
+
 def pooled_sd(noise: pd.DataFrame, variant: str | None = None) -> dict:
     """Root mean seed variance of each metric over a noise floor's points: a noise-floor CSV
     (``<metric>_sd`` per point) or, with ``variant``, that variant's runs in a ``bench_fidelity``
     run table (the sd over its seeds at each point)."""
     if variant is not None:
-        runs = noise[(noise["variant"] == variant) & (noise["error"].isna() if "error" in noise else True)]
-        if runs.empty:
-            raise ValueError(f"no runs of variant {variant!r} in the noise table")
-        sd = runs.groupby(KEYS)[list(METRICS)].std()
+        sd = variant_runs(noise, variant).groupby(KEYS)[list(METRICS)].std()
         return {k: float(np.sqrt((sd[k] ** 2).mean())) for k in METRICS}
     return {k: float(np.sqrt((noise[f"{k}_sd"] ** 2).mean())) for k in METRICS if f"{k}_sd" in noise}
 
@@ -83,6 +92,7 @@ def main(argv=None) -> int:
     parser.add_argument("--noise", type=Path, help="a noise-floor CSV (<metric>_sd per point), or a bench_fidelity "
                         "run table with --noise-variant")
     parser.add_argument("--noise-variant", help="the variant of --noise's runs whose seed sd judges the change")
+    parser.add_argument("--old-variant", help="OLD is a bench_fidelity run table: this variant's runs are the old map")
     parser.add_argument("--name", default="maps_compared")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     args = parser.parse_args(argv)
@@ -94,6 +104,8 @@ def main(argv=None) -> int:
         parser.error(f"--labels {args.labels!r}: give two names, comma-separated")
     datasets = [pd.read_csv(path) for path in (args.old, args.new)]
     try:
+        if args.old_variant is not None:
+            datasets[0] = variant_runs(datasets[0], args.old_variant)
         sds = pooled_sd(pd.read_csv(args.noise), args.noise_variant) if args.noise else None
         table = compare(*datasets, sds)
     except ValueError as err:
@@ -104,6 +116,7 @@ def main(argv=None) -> int:
     text = (f"# {labels[1]} against {labels[0]}: the same Design of Simulations\n\n"
             f"Compared {time.strftime('%Y-%m-%d')} at commit {commit()} by\n`.venv/bin/python "
             f"benchmarks/compare_maps.py {args.old} {args.new} --labels \"{args.labels}\""
+            + (f" --old-variant {args.old_variant}" if args.old_variant else "")
             + (f" --noise {args.noise}" if args.noise else "")
             + (f" --noise-variant {args.noise_variant}" if args.noise_variant else "") + "`.\n\n"
             "change_pct: the mean over the points of 100 (new - old) / old; abs_change_in_sds: the mean absolute "

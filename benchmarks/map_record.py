@@ -8,7 +8,9 @@ Reads ``<results>/<level>/`` (``dataset.csv``, ``trends.md``, ``surrogate/scores
 ``surrogate/model_choice.md``, ``surrogate/noise_floor.md``) and the per-job benchmark files
 ``<results>/benchmarks/<level>/<rule>/*.tsv`` that Snakemake wrote, and writes
 ``benchmarks/measured/map_<level>.md``: the one place the whole map's cost and its findings are
-recorded (the docs link to it). The wall time is the span from the first job's start to the last
+recorded (the docs link to it), and beside it ``map_<level>_dataset.csv``, the map's points and
+metrics, so that the next map can be compared with it point by point (``compare_maps.py``).
+The wall time is the span from the first job's start to the last
 job's end (their benchmark files), unless ``--wall-min`` gives the measured one.
 """
 from __future__ import annotations
@@ -25,6 +27,9 @@ sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkou
 
 from analysis.columns import METRICS  # noqa: E402
 from benchmarks.machine import commit, machine  # noqa: E402
+
+#: The dataset's columns kept beside the record (with the metrics): enough to compare two maps.
+KEPT = ["U_mm_s", "omega_rad_s", "replicate", "cpu_s", "supply_margin"]
 
 
 def job_times(bench_dir: Path) -> pd.DataFrame:
@@ -144,7 +149,10 @@ def main(argv=None) -> int:
         parser.error(f"--results {args.results}: no {args.level}/dataset.csv there; run the workflow first")
     out = args.out or ROOT / "benchmarks/measured" / f"map_{args.level}.md"
     out.write_text(record(args.results, args.level, args.wall_min, made_at=args.commit))
-    print(f"wrote {out}")
+    kept = out.with_name(f"{out.stem}_dataset.csv")
+    data = pd.read_csv(args.results / args.level / "dataset.csv")
+    data[[c for c in KEPT if c in data] + list(METRICS)].to_csv(kept, index=False)
+    print(f"wrote {out} and {kept}")
     return 0
 
 

@@ -150,3 +150,25 @@ def test_two_maps_are_compared_per_group_of_points_in_the_seed_sd_given(tmp_path
     assert table.loc[("all", "R_q"), "20 MPa mean"] == pytest.approx(80.0 * (1 + 0.1 / 3))
     with pytest.raises(SystemExit):
         compare_maps.main([str(tmp_path / "old.csv"), str(tmp_path / "none.csv")])
+
+
+def test_a_map_is_compared_with_a_run_tables_seed_means_at_the_points_it_ran(tmp_path):
+    """--old-variant: the old map is one variant's seed means (two points of a bench_fidelity table);
+    the new map's other points are left out, and a table without that variant is refused by name."""
+    base = {"mass_g": 2.0, "throughput_mm2_s": 20.0, "roughness_um": 80.0, "porosity_pct": 40.0}
+    sds = {k: 0.05 * v for k, v in base.items()}
+    runs = pd.DataFrame(runs_of("E2e7", base, sds) + runs_of("other", {k: 9 * v for k, v in base.items()}, sds))
+    runs.to_csv(tmp_path / "runs.csv", index=False)
+    new = pd.DataFrame([{"U_mm_s": U, "omega_rad_s": w, "replicate": 0, **base} for U in (40, 70) for w in (-15, 0)])
+    new.loc[new["omega_rad_s"] == 0, "roughness_um"] = 84.0
+    new.to_csv(tmp_path / "new.csv", index=False)
+    assert compare_maps.main([str(tmp_path / "runs.csv"), str(tmp_path / "new.csv"), "--old-variant", "E2e7",
+                              "--noise", str(tmp_path / "runs.csv"), "--noise-variant", "E2e7",
+                              "--out", str(tmp_path), "--name", "c"]) == 0
+    table = pd.read_csv(tmp_path / "c.csv").set_index(["points", "metric"])
+    assert table.loc[("all", "M_s"), "n"] == 2 and table.loc[("all", "M_s"), "change_pct"] == pytest.approx(0.0)
+    assert table.loc[("omega = 0", "R_q"), "change_pct"] == pytest.approx(5.0)
+    assert table.loc[("omega = 0", "R_q"), "abs_change_in_sds"] == pytest.approx(1.0)   # 4 um / 4 um
+    with pytest.raises(SystemExit):
+        compare_maps.main([str(tmp_path / "runs.csv"), str(tmp_path / "new.csv"), "--old-variant", "E5e6",
+                           "--out", str(tmp_path)])

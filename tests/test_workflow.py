@@ -86,6 +86,8 @@ def test_map_record_benchmark_reads_the_finished_map(workflow, tmp_path):
     spread_jobs = int(re.search(r"^\| spread \| (\d+) \|", text, re.MULTILINE).group(1))
     assert spread_jobs >= len(data)  # the sweep's spreads (and any run outside it asked for by path)
     assert "## The paper's trends (section 3)" in text and "| agrees" in text
+    kept = pd.read_csv(tmp_path / "map_smoke_dataset.csv")
+    assert kept[["U_mm_s", "omega_rad_s", "roughness_um"]].equals(data[["U_mm_s", "omega_rad_s", "roughness_um"]])
 
 
 def test_dataset_has_one_sane_row_per_run(workflow):
