@@ -34,6 +34,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pandas as pd
+import yaml
 
 from analysis.config.fidelity import scene
 from analysis.config.load import load_config
@@ -51,6 +52,9 @@ METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "p
 #: level as configured.
 VARIANTS = {
     "default": {},
+    # the tests' free-flowing powder (.test/config.yaml): the smoke level's noise floor the tests judge by
+    "test_powder": {f"material.{k}": v for k, v in
+                    yaml.safe_load((ROOT / ".test/config.yaml").read_text())["material"].items()},
     "reference": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "timestep.rayleigh_fraction": 0.1,
                   "LEVEL.size_classes": 9, "LEVEL.profilometer_lines": 2000},
     "E2e7": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7},
@@ -96,10 +100,12 @@ VARIANTS = {
     "unfed40": {"LEVEL.feed_pile_mg_per_mm": None, "LEVEL.heap_particles": 3640},
     # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction
     "dt0.5": {"timestep.rayleigh_fraction": 0.5},
+    # the smoke level's pile for the calibrated powder (benchmarks/measured/smoke_pile15.md)
+    "pile15": {"LEVEL.feed_pile_mg_per_mm": 15, "LEVEL.heap_particles": 1140},
 }
 
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).
-HEALTH = ("heap_exhausted", "max_overlap_fraction", "max_overlap_anywhere", "peak_speed_m_s",
+HEALTH = ("heap_exhausted", "supply_margin", "max_overlap_fraction", "max_overlap_anywhere", "peak_speed_m_s",
           "inrun_max_overlap_fraction", "inrun_max_wall_overlap_fraction", "squeeze_outs_max",
           "fed_max_ahead_of_front_mm", "fed_share_of_region_layer", "unstable_retries")
 

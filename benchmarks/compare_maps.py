@@ -3,15 +3,16 @@
 Run from the repository root (no simulation; it reads two finished maps' datasets)::
 
     .venv/bin/python benchmarks/compare_maps.py OLD/dataset.csv NEW/dataset.csv \
-        [--labels "5 MPa,20 MPa"] [--old-variant NAME] [--noise benchmarks/measured/noise_default.csv |
-        --noise RUNS.csv --noise-variant NAME] [--name maps_compared]
+        [--labels "5 MPa,20 MPa"] [--old-variant NAME | --old-means LABEL]
+        [--noise benchmarks/measured/noise_default.csv | --noise RUNS.csv --noise-variant NAME] [--name maps_compared]
 
 For each of the four metrics and each group of points (all, omega < 0, omega = 0, omega > 0): the
 mean of each map over the points both ran, the mean relative change ``100 (new - old) / old`` per
 point, and the mean absolute change in the pooled seed sd of ``--noise`` (optional: a noise-floor
 CSV with ``<metric>_sd`` columns per point, or a ``bench_fidelity`` run table and the variant whose
 seeds give it; its sampling region should be the maps'). With ``--old-variant``, OLD is such a run table
-and that variant's seed means per point stand for the old map (only the points it ran are compared).
+and that variant's seed means per point stand for the old map (only the points it ran are compared);
+with ``--old-means``, OLD is an earlier comparison's table and its group means stand for the old map.
 Writes ``benchmarks/measured/<name>.csv`` and ``.md``.
 """
 from __future__ import annotations
@@ -60,6 +61,31 @@ def pooled_sd(noise: pd.DataFrame, variant: str | None = None) -> dict:
     return {k: float(np.sqrt((noise[f"{k}_sd"] ** 2).mean())) for k in METRICS if f"{k}_sd" in noise}
 
 
+def compare_with_means(old_means: pd.DataFrame, label: str, new: pd.DataFrame, sds: dict | None = None) -> pd.DataFrame:
+    """As :func:`compare`, against an older map kept only as a comparison's group means (the
+    ``<label> mean`` column of an earlier ``compare_maps`` table): the change of the group's mean [%]
+    and, with ``sds``, of the mean in those sds."""
+    column = f"{label} mean"
+    if column not in old_means:
+        raise ValueError(f"no column {column!r} in the old comparison (its columns: {', '.join(old_means.columns)})")
+    b = point_means(new)
+    omega = b.index.get_level_values("omega_rad_s").to_numpy()
+    old_by = old_means.set_index(["points", "metric"])[column]
+    rows = []
+    for group, pick in GROUPS.items():
+        mask = pick(omega)
+        for k, name in METRICS.items():
+            if not mask.any() or (group, name) not in old_by.index:
+                continue
+            x, y = float(old_by[(group, name)]), float(b[k].to_numpy()[mask].mean())
+            row = {"points": group, "n": int(mask.sum()), "metric": name, "old_mean": x, "new_mean": y,
+                   "change_pct": 100 * (y - x) / x}
+            if sds and k in sds:
+                row["abs_change_in_sds"] = abs(y - x) / sds[k]
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
 def compare(old: pd.DataFrame, new: pd.DataFrame, sds: dict | None = None) -> pd.DataFrame:
     """One row per (group of points, metric): both maps' means, the mean relative change [%] and,
     with ``sds`` (metric -> pooled seed sd), the mean absolute change in those sds."""
@@ -93,6 +119,8 @@ def main(argv=None) -> int:
                         "run table with --noise-variant")
     parser.add_argument("--noise-variant", help="the variant of --noise's runs whose seed sd judges the change")
     parser.add_argument("--old-variant", help="OLD is a bench_fidelity run table: this variant's runs are the old map")
+    parser.add_argument("--old-means", metavar="LABEL", help="OLD is an earlier comparison's table: its "
+                        "'<LABEL> mean' column holds the old map's group means (the change is of the means)")
     parser.add_argument("--name", default="maps_compared")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     args = parser.parse_args(argv)
@@ -107,7 +135,8 @@ def main(argv=None) -> int:
         if args.old_variant is not None:
             datasets[0] = variant_runs(datasets[0], args.old_variant)
         sds = pooled_sd(pd.read_csv(args.noise), args.noise_variant) if args.noise else None
-        table = compare(*datasets, sds)
+        table = (compare_with_means(datasets[0], args.old_means, datasets[1], sds) if args.old_means
+                 else compare(*datasets, sds))
     except ValueError as err:
         parser.error(str(err))
     table = table.rename(columns={"old_mean": f"{labels[0]} mean", "new_mean": f"{labels[1]} mean"})
@@ -117,10 +146,13 @@ def main(argv=None) -> int:
             f"Compared {time.strftime('%Y-%m-%d')} at commit {commit()} by\n`.venv/bin/python "
             f"benchmarks/compare_maps.py {args.old} {args.new} --labels \"{args.labels}\""
             + (f" --old-variant {args.old_variant}" if args.old_variant else "")
+            + (f" --old-means \"{args.old_means}\"" if args.old_means else "")
             + (f" --noise {args.noise}" if args.noise else "")
             + (f" --noise-variant {args.noise_variant}" if args.noise_variant else "") + "`.\n\n"
-            "change_pct: the mean over the points of 100 (new - old) / old; abs_change_in_sds: the mean absolute "
-            "change over the pooled seed sd of the noise floor given.\n\n"
+            + ("change_pct: 100 (new - old) / old of the group's means; abs_change_in_sds: the means' absolute "
+               if args.old_means else
+               "change_pct: the mean over the points of 100 (new - old) / old; abs_change_in_sds: the mean absolute ")
+            + "change over the pooled seed sd of the noise floor given.\n\n"
             + table.to_markdown(index=False, floatfmt=".3g") + "\n")
     (args.out / f"{args.name}.md").write_text(text)
     print(text)

@@ -145,6 +145,10 @@ def fake_snakemake(tmp_path):
 
 @pytest.fixture(scope="session")
 def config():
-    """The shipped config.yaml, loaded and checked."""
+    """The shipped config.yaml with the tests' powder (.test/config.yaml's ``material``: the smoke
+    scene cannot carry the calibrated powder under forward rolling), loaded and checked."""
     from analysis.config.load import load_config
-    return load_config(Path(__file__).resolve().parent.parent / "config.yaml")
+    root = Path(__file__).resolve().parent.parent
+    shipped = yaml.safe_load((root / "config.yaml").read_text())
+    test_powder = yaml.safe_load((root / ".test/config.yaml").read_text())["material"]
+    return load_config({**shipped, "material": {**shipped["material"], **test_powder}}, base_dir=root)

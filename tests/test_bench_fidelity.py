@@ -172,3 +172,13 @@ def test_a_map_is_compared_with_a_run_tables_seed_means_at_the_points_it_ran(tmp
     with pytest.raises(SystemExit):
         compare_maps.main([str(tmp_path / "runs.csv"), str(tmp_path / "new.csv"), "--old-variant", "E5e6",
                            "--out", str(tmp_path)])
+    # --old-means: the old map kept only as that comparison's group means ("new mean": the new map's)
+    assert compare_maps.main([str(tmp_path / "c.csv"), str(tmp_path / "new.csv"), "--old-means", "new",
+                              "--out", str(tmp_path), "--name", "m"]) == 0
+    means = pd.read_csv(tmp_path / "m.csv").set_index(["points", "metric"])
+    assert means.loc[("omega = 0", "R_q"), "old mean"] == pytest.approx(84.0)
+    assert means.loc[("all", "R_q"), "change_pct"] == pytest.approx(100 * (82.0 - 82.0) / 82.0)
+    assert means.loc[("omega < 0", "M_s"), "n"] == 2 and means.loc[("omega < 0", "M_s"), "change_pct"] == 0
+    with pytest.raises(SystemExit):
+        compare_maps.main([str(tmp_path / "c.csv"), str(tmp_path / "new.csv"), "--old-means", "5 MPa",
+                           "--out", str(tmp_path)])

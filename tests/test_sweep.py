@@ -24,8 +24,10 @@ from analysis.metrics.dataset import build_dataset, point_groups, point_means
 from analysis.surrogate.data import inputs_of, split_runs
 
 ROOT = Path(__file__).resolve().parents[1]
+#: config.yaml's own particle sliding friction: a swept value equal to it names no folder
+OWN_FRICTION = yaml.safe_load((ROOT / "config.yaml").read_text())["material"]["sliding_friction_particle"]
 THREE_AXES = {"U_mm_s": [85, 100], "omega_rad_s": [-10, 5], "replicates": 1,
-              "roller.gap_um": [300, 400], "material.sliding_friction_particle": [0.3, 0.5]}
+              "roller.gap_um": [300, 400], "material.sliding_friction_particle": [0.3, OWN_FRICTION]}
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +56,7 @@ def test_extra_axes_make_a_full_grid_with_nested_folders(base):
     config = load_config(with_sweep(base, **THREE_AXES))
     runs = sweep_runs(config)
     assert len(runs) == 2 * 2 * 2 * 2
-    # a value equal to the config's own (gap 300 um, friction 0.5) is left out of the folder names
+    # a value equal to the config's own (gap 300 um, its friction) is left out of the folder names
     assert [r.name for r in runs[:4]] == ["material.sliding_friction_particle=0.3/U85_w-10_r0", "U85_w-10_r0",
                                           "roller.gap_um=400/material.sliding_friction_particle=0.3/U85_w-10_r0",
                                           "roller.gap_um=400/U85_w-10_r0"]
@@ -214,7 +216,7 @@ def test_a_new_value_runs_only_what_it_changes(tmp_path):
     gap = _jobs(_dry_run(workdir, config_file, "--config", 'sweep={"roller.gap_um": [300, 400, 350]}'))
     assert gap["spread"] == "8" and "settle" not in gap and "geometry" not in gap
     friction = _jobs(_dry_run(workdir, config_file, "--config",
-                              'sweep={"material.sliding_friction_particle": [0.3, 0.5, 0.7]}'))
+                              f'sweep={{"material.sliding_friction_particle": [0.3, {OWN_FRICTION}, 0.7]}}'))
     assert (friction["geometry"], friction["settle"], friction["spread"]) == ("1", "1", "8")
 
 
