@@ -103,7 +103,8 @@ def test_dataset_has_one_sane_row_per_run(workflow):
     assert np.allclose(data.throughput_mm2_s, data.U_mm_s * data.thickness_um * 1e-3)
     assert np.all(data.wall_s > 0) and np.all(data.steps > 0)
     # the smoke scene's pile (760 particles of the tests' powder, fed from above where it has room) lasts at
-    # the points the tests use: forward rolling at U = 100 mm/s leaves about a sixth of it; LIGGGHTS' own CPU time is the cost
+    # the points the tests use: forward rolling at U = 100 mm/s leaves about a sixth of it; LIGGGHTS' own CPU
+    # time is the cost
     assert not data.heap_exhausted.any() and np.all(data.supply_margin > 0.05)
     # the feed tops every pile up from above, behind its front (within a largest diameter, 0.21 mm here)
     assert np.all(data.fed_particles > 0) and np.all(data.feed_topups > 5)
