@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 from conftest import SMOKE_SEED_SD
 from scipy.spatial import cKDTree
 
@@ -248,9 +249,11 @@ def test_killed_spread_resumes_from_its_newest_checkpoint(smoke, config):
     ends where the uninterrupted run's did, and nothing is lost."""
     root, s = smoke["root"], smoke["scene"]
     out = root / "killed"
-    cmd = [sys.executable, "-m", "analysis.dem.simulate", "spread", "--level", "smoke", "--U", str(U_MM_S),
-           "--omega", str(OMEGA), "--meshes", str(root / "meshes"), "--settled", str(root / "settle"),
-           "--out", str(out)]
+    killed_config = root / "killed_config.yaml"  # the tests' powder, as the in-process runs: same physics
+    killed_config.write_text(yaml.safe_dump(config))
+    cmd = [sys.executable, "-m", "analysis.dem.simulate", "spread", "--config", str(killed_config), "--level", "smoke",
+           "--U", str(U_MM_S), "--omega", str(OMEGA), "--meshes", str(root / "meshes"),
+           "--settled", str(root / "settle"), "--out", str(out)]
     job = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                            start_new_session=True)
     travel_steps = max(int(p.stem.split("_")[1]) for p in (root / "run").glob("roller_*.vtk"))
