@@ -161,3 +161,33 @@ def test_a_fed_particle_is_judged_against_the_front_where_the_pile_is_when_it_la
     receded = feed_landings(tmp_path, {"feed_front_100": 1.0e-3, "feed_front_200": 1.2e-3}, roller_x,
                             {100: 200, 200: 300}).set_index("id")
     assert receded.loc[100, "ahead_of_front_m"] == pytest.approx(1.9e-3 - 1.5e-3)
+
+
+def test_a_jam_under_the_stopped_roller_is_reported_not_refused_but_one_elsewhere_is(config, tmp_path):
+    """Final-state overlaps: a pair squeezed 60 % of a radius in the stopped roller's nip is
+    recorded (``max_overlap_nip``) and passes, as the nip's overlaps during a run do; the same pair
+    on the bed behind the roller, or with no roller given, is refused by name."""
+    import trimesh
+
+    from analysis.config.fidelity import scene
+    from analysis.dem.health import layer_health
+    s = scene(config, "smoke")
+    stl = tmp_path / "flat.stl"
+    trimesh.Trimesh([[-0.05, -0.01, 0], [0.05, -0.01, 0], [0.05, 0.01, 0], [-0.05, 0.01, 0]],
+                    [[0, 1, 2], [0, 2, 3]]).export(stl)
+    r, axis = 100e-6, (0.013, 0.0153, s.roller_radius)
+
+    def atoms(x_pair):
+        """Two resting particles in the sampling region, and a pair stacked 60 % of a radius into each other."""
+        x = [5.0e-3, 5.5e-3, x_pair, x_pair]
+        z = [r, r, r, r + 2 * r - 0.6 * r]
+        return pd.DataFrame({"id": range(1, 5), "x": x, "y": 5e-4, "z": z, "radius": r, "vx": 0.0, "vy": 0.0,
+                             "vz": 0.0})
+
+    nip = layer_health(atoms(axis[0]), s, stl, 4, roller=axis)
+    assert nip["max_overlap_nip"] == pytest.approx(0.6) and nip["max_overlap_anywhere"] == 0.0
+    assert nip["max_overlap_fraction"] == 0.0
+    with pytest.raises(LiggghtsError, match=r"largest overlap 60.0% of a radius exceeds 50%"):
+        layer_health(atoms(axis[0]), s, stl, 4)
+    with pytest.raises(LiggghtsError, match=r"largest overlap 60.0% of a radius exceeds 50%"):
+        layer_health(atoms(axis[0] - 10e-3), s, stl, 4, roller=axis)   # on the bed behind the roller

@@ -405,7 +405,8 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
     # particles fed before a resumed attempt are in its first thermo row
     fed = int(log["thermo"]["Atoms"].iloc[0]) - plan.settled_particles + int(log["inserted"])
     health.update(through_roller=inside, fed_particles=fed,
-                  **layer_health(atoms, s, plan.meshes / "substrate.stl", plan.settled_particles + fed - removed))
+                  **layer_health(atoms, s, plan.meshes / "substrate.stl", plan.settled_particles + fed - removed,
+                                 roller=(plan.step_x(plan.travel_steps), plan.context["roller_z"], s.roller_radius)))
     health.update(heap_supply(ahead, s.heap_particles), removed_ahead_of_roller=removed,
                   mass_ahead_of_roller_kg=float(log["printed"]["mass_ahead_of_roller_kg"]))
     feeds = plan.feeds
