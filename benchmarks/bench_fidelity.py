@@ -184,7 +184,11 @@ def run_scene(task) -> list[dict]:
 
 
 def summarise(runs: pd.DataFrame, reference: str) -> pd.DataFrame:
-    """One row per variant: cost per run and relative error per metric against ``reference``."""
+    """One row per variant: cost per run and relative error per metric against ``reference``.
+
+    A variant run at fewer points than the reference is judged at the points it ran only: its
+    error is the mean |variant - reference| there over the reference's mean |value| there, and
+    ``points`` says how many (its cost per run is over those points too)."""
     failed = runs["error"].notna() if "error" in runs else pd.Series(False, index=runs.index)
     fails = failed.groupby(runs["variant"], sort=False).sum()
     runs = runs[~failed]
@@ -196,8 +200,9 @@ def summarise(runs: pd.DataFrame, reference: str) -> pd.DataFrame:
     scale = ref.abs().mean()
     rows = []
     for variant, group in runs.groupby("variant", sort=False):
-        err = (means.loc[variant] - ref).abs().mean() / scale
-        rows.append({"variant": variant, "seeds": group["seed"].nunique(), "runs": len(group),
+        shared = means.loc[variant].index.intersection(ref.index)
+        err = (means.loc[variant].loc[shared] - ref.loc[shared]).abs().mean() / ref.loc[shared].abs().mean()
+        rows.append({"variant": variant, "points": len(shared), "seeds": group["seed"].nunique(), "runs": len(group),
                      "failed": int(fails.get(variant, 0)),
                      "cpu_s_per_run": group["cpu_s"].mean(), "wall_s_per_run": group["wall_s"].mean(),
                      "steps_per_run": group["steps"].mean(), "particles": int(group["particles"].max()),

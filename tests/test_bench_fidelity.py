@@ -47,6 +47,22 @@ def test_mass_is_compared_per_unit_sampling_area_and_failed_runs_are_left_out():
     assert step["M_s shift (finer sds)"] == pytest.approx(0.0, abs=1e-9) and step["converged"]
 
 
+def test_a_variant_run_at_fewer_points_is_judged_at_those_points_only():
+    """A knob run at omega -15 only, 10 % off there, against a reference that also ran omega 0 with
+    ten times less mass: 10 %, not 10 % of the mass at -15 over the mean of both points (18 %)."""
+    big = {"mass_g": 10.0, "throughput_mm2_s": 50.0, "roughness_um": 160.0, "porosity_pct": 30.0}
+    small = {"mass_g": 1.0, "throughput_mm2_s": 12.0, "roughness_um": 85.0, "porosity_pct": 65.0}
+    sds = dict.fromkeys(METRICS, 0.01)
+    reference = (runs_of("ref", big, sds, points=((70, -15),))
+                 + runs_of("ref", small, sds, points=((70, 0),)))
+    knob = runs_of("knob", {**big, "mass_g": 11.0}, sds, points=((70, -15),))
+    runs = pd.DataFrame(reference + knob).assign(cpu_s=100.0, wall_s=110.0, steps=1000, particles=500)
+    table = bench_fidelity.summarise(runs, "ref").set_index("variant")
+    assert table.loc["knob", "points"] == 1 and table.loc["ref", "points"] == 2
+    assert table.loc["knob", "err_M_s"] == pytest.approx(0.10)
+    assert table.loc["knob", "err_Q_s"] == pytest.approx(0.0, abs=1e-12)
+
+
 def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchmark_remeasures_its_layer(tmp_path):
     """One smoke spread, the ladder's table, and the kept layer re-measured by bench_region.py over a
     longer region: both benchmarks' own paths, on one LIGGGHTS run."""
