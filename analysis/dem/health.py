@@ -251,6 +251,15 @@ def feed_health(landings: pd.DataFrame, atoms, first_fed_id: int, region: tuple)
             "fed_in_region_landed_ahead_of_roller_mm_max": float(ahead.max()) if len(ahead) else 0.0}
 
 
+def feed_pile_fraction(printed: dict, pile_mass: float) -> float:
+    """The lightest the pile was when a top-up weighed it, over the mass it is held at
+    (``feed_pile_kg_<step>`` lines of the spread's log over ``pile_mass`` [kg]; NaN when no top-up
+    was printed). Well below 1: the feed could not place what the pile lacked (LIGGGHTS' "Less
+    insertions than requested"), so the layer was laid from a shrinking pile."""
+    weighed = [v for k, v in printed.items() if k.startswith("feed_pile_kg_")]
+    return float(min(weighed) / pile_mass) if weighed else float("nan")
+
+
 def through_roller(atoms, axis_x: float, axis_z: float, radius: float) -> int:
     """Particles whose centre is inside the roller (axis along y at ``axis_x``,
     ``axis_z`` [m], ``radius`` [m]): they passed through its surface."""

@@ -39,6 +39,7 @@ from analysis.dem.health import (
     check_timestep,
     feed_health,
     feed_landings,
+    feed_pile_fraction,
     heap_supply,
     inrun_health,
     layer_health,
@@ -414,7 +415,9 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
         landings = feed_landings(out / FEED_DIR, log["printed"], plan.step_x,
                                  dict(zip(feeds, feeds[1:] + [plan.travel_steps])))
         landings.to_csv(out / "feed_landings.csv", index=False)
-        health.update(feed_topups=len(feeds), **feed_health(landings, atoms, plan.first_fed_id, s.sampling_region))
+        health.update(feed_topups=len(feeds),
+                      feed_pile_min_fraction=feed_pile_fraction(log["printed"], s.feed_pile_mass),
+                      **feed_health(landings, atoms, plan.first_fed_id, s.sampling_region))
     thermo = log["thermo"]
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
     # particle-steps of every particle integrated during the run (the pile included), per CPU second

@@ -22,7 +22,7 @@ HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_p
           "effective_gap_um", "gap_min_um", "gap_max_um", "substrate_mean_region_m",
           "inrun_max_overlap_um", "inrun_max_overlap_fraction", "inrun_max_wall_overlap_um",
           "inrun_max_wall_overlap_fraction", "squeeze_outs_max", "squeeze_out_samples",
-          "feed_topups", "fed_max_ahead_of_front_mm", "fed_share_of_region_layer",
+          "feed_topups", "feed_pile_min_fraction", "fed_max_ahead_of_front_mm", "fed_share_of_region_layer",
           "fed_in_region_landed_ahead_of_roller_mm_median",
           "time_pair_s", "time_neigh_s", "time_comm_s", "time_other_s", "time_loop_s"]
 
