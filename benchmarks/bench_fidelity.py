@@ -89,6 +89,9 @@ VARIANTS = {
     # both unconverged knobs turned together: the reference the default is judged against
     "E2e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 2.5,
                              "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
+    # the reference one step stiffer: does the stiffness shift of the default's scene hold on the bigger one?
+    "E5e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7, "LEVEL.strip_width_mm": 2.5,
+                             "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
     # the width one step past the 2.5 mm strip (28 mean diameters), the pile's 20 mg/mm over 5 mm
     "E2e7+strip5": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 5.0,
                     "LEVEL.heap_particles": 7580},
@@ -107,7 +110,7 @@ VARIANTS = {
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).
 HEALTH = ("heap_exhausted", "supply_margin", "max_overlap_fraction", "max_overlap_anywhere", "peak_speed_m_s",
           "inrun_max_overlap_fraction", "inrun_max_wall_overlap_fraction", "squeeze_outs_max",
-          "fed_max_ahead_of_front_mm", "fed_share_of_region_layer", "unstable_retries")
+          "fed_max_ahead_of_front_mm", "fed_share_of_region_layer", "feed_pile_min_fraction", "unstable_retries")
 
 
 def variant_config(base: dict, level: str, overrides: dict) -> dict:

@@ -29,7 +29,7 @@ from analysis.columns import METRICS  # noqa: E402
 from benchmarks.machine import commit, machine  # noqa: E402
 
 #: The dataset's columns kept beside the record (with the metrics): enough to compare two maps.
-KEPT = ["U_mm_s", "omega_rad_s", "replicate", "cpu_s", "supply_margin"]
+KEPT = ["U_mm_s", "omega_rad_s", "replicate", "cpu_s", "supply_margin", "feed_pile_min_fraction"]
 
 
 def job_times(bench_dir: Path) -> pd.DataFrame:
@@ -66,7 +66,9 @@ def soundness(df: pd.DataFrame) -> str:
                f"(over a turn {df['gap_min_um'].min():.1f}-{df['gap_max_um'].max():.1f} um)")
     out.append(f"- fed powder: its share of the sampling region's layer {df['fed_share_of_region_layer'].min():.2f}-"
                f"{df['fed_share_of_region_layer'].max():.2f}; farthest landed ahead of the pile's front "
-               f"{df['fed_max_ahead_of_front_mm'].max():.3f} mm")
+               f"{df['fed_max_ahead_of_front_mm'].max():.3f} mm; the pile at its lightest top-up "
+               f"{df['feed_pile_min_fraction'].min():.2f} of its set mass (runs below 0.9: "
+               f"{int((df['feed_pile_min_fraction'] < 0.9).sum())})")
     return "\n".join(out)
 
 

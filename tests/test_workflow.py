@@ -81,6 +81,7 @@ def test_map_record_benchmark_reads_the_finished_map(workflow, tmp_path):
     assert f"; {len(data)} spreads" in text
     assert f"LIGGGHTS' CPU: {data.cpu_s.sum():.0f} s in all" in text
     assert f"smallest `supply_margin` {data.supply_margin.min():.2f}" in text
+    assert f"the pile at its lightest top-up {data.feed_pile_min_fraction.min():.2f} of its set mass" in text
     assert f"| M_s | {scores['test']['mass_g']['R']:.3f} |" in text
     assert f"Chosen model: **{scores['model']['name']}**" in text
     spread_jobs = int(re.search(r"^\| spread \| (\d+) \|", text, re.MULTILINE).group(1))
@@ -106,9 +107,10 @@ def test_dataset_has_one_sane_row_per_run(workflow):
     # the points the tests use: forward rolling at U = 100 mm/s leaves about a sixth of it; LIGGGHTS' own CPU
     # time is the cost
     assert not data.heap_exhausted.any() and np.all(data.supply_margin > 0.05)
-    # the feed tops every pile up from above, behind its front (within a largest diameter, 0.21 mm here)
+    # the feed tops every pile up on its slope and toe: placed at most a largest diameter (0.21 mm here)
+    # ahead of its front, and rolled at most one more by the next top-up
     assert np.all(data.fed_particles > 0) and np.all(data.feed_topups > 5)
-    assert np.all(data.fed_max_ahead_of_front_mm < 0.25)
+    assert np.all(data.fed_max_ahead_of_front_mm < 0.42)
     assert np.all((data.fed_share_of_region_layer >= 0) & (data.fed_share_of_region_layer < 1))
     assert np.all((data.cpu_s > 0) & (data.cpu_s <= 1.05 * data.wall_s))  # one rank: CPU within the wall time
     assert (data.resumed_from_step == 0).all()                            # none was interrupted

@@ -111,8 +111,10 @@ def feed_plan(s: Scene, x0: float, speed: float, travel_steps: int, heap_toe: fl
 PILE_FRONT_DEPTH_DIAMETERS = 1.0
 
 
-#: Fed particles are placed at least this many largest diameters behind the pile's front.
-FEED_BEHIND_FRONT_DIAMETERS = 1.0
+#: Fed particles are placed at most this many largest diameters ahead of the pile's front: on
+#: its front slope and toe, where a forward-rolling roller, which packs the pile into the wedge
+#: under it, leaves the only free room (docs/scene.md: The feed).
+FEED_AHEAD_OF_FRONT_DIAMETERS = 1.0
 
 
 def feed_zone(s: Scene, x_axis: float, floor: float, axis_z: float) -> dict:
@@ -123,9 +125,9 @@ def feed_zone(s: Scene, x_axis: float, floor: float, axis_z: float) -> dict:
     there. ``body``: its part at least :data:`PILE_FRONT_DEPTH_DIAMETERS` mean diameters
     above the floor; the pile's front is the farthest particle in it, measured by LIGGGHTS at
     each top-up. New particles are placed at rest in free places of the wedge from the axis
-    to :data:`FEED_BEHIND_FRONT_DIAMETERS` largest diameters behind that front (``margin``),
+    to :data:`FEED_AHEAD_OF_FRONT_DIAMETERS` largest diameters ahead of that front (``ahead``),
     clear of the roller (a cylinder of its radius plus the largest particle's), so they land
-    on the pile, never on bare bed ahead of it; ``x1`` bounds the front from above."""
+    on the pile or its toe, never on bare bed farther ahead; ``x1`` bounds that reach from above."""
     r = s.roller_radius
     top = axis_z - sqrt(r**2 - s.feed_length**2)
     d_max = max(s.diameters)
@@ -135,7 +137,7 @@ def feed_zone(s: Scene, x_axis: float, floor: float, axis_z: float) -> dict:
     room = sqrt(max(clear**2 - (axis_z - floor - d_max) ** 2, 0.0))
     return {"x0": x_axis, "x1": x_axis + s.feed_length, "z0": floor, "z1": top,
             "body_z0": floor + PILE_FRONT_DEPTH_DIAMETERS * float(np.mean(s.diameters)),
-            "margin": FEED_BEHIND_FRONT_DIAMETERS * d_max, "min_x1": x_axis + min(room, s.feed_length),
+            "ahead": FEED_AHEAD_OF_FRONT_DIAMETERS * d_max, "min_x1": x_axis + min(room, s.feed_length),
             "axis_z": axis_z, "radius": clear}
 
 
