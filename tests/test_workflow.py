@@ -103,10 +103,10 @@ def test_dataset_has_one_sane_row_per_run(workflow):
     # eq. 5: Q_s = U thk_avg
     assert np.allclose(data.throughput_mm2_s, data.U_mm_s * data.thickness_um * 1e-3)
     assert np.all(data.wall_s > 0) and np.all(data.steps > 0)
-    # the smoke scene's pile (760 particles of the tests' powder, fed from above where it has room) lasts at
-    # the points the tests use: forward rolling at U = 100 mm/s leaves about a sixth of it; LIGGGHTS' own CPU
-    # time is the cost
-    assert not data.heap_exhausted.any() and np.all(data.supply_margin > 0.05)
+    # the smoke scene's pile (760 particles of the tests' powder, fed on its slope and toe) is held at the
+    # points the tests use: forward rolling at U = 85 and 100 mm/s leaves 0.93 of it (2026-12-05; a sixth
+    # when the feed could only place particles behind the pile's front); LIGGGHTS' own CPU time is the cost
+    assert not data.heap_exhausted.any() and np.all(data.supply_margin > 0.8)
     # the feed tops every pile up on its slope and toe: placed at most a largest diameter (0.21 mm here)
     # ahead of its front, and rolled at most one more by the next top-up
     assert np.all(data.fed_particles > 0) and np.all(data.feed_topups > 5)
