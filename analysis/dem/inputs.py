@@ -113,7 +113,7 @@ PILE_FRONT_DEPTH_DIAMETERS = 1.0
 
 #: Fed particles are placed at most this many largest diameters ahead of the pile's front: on
 #: its front slope and toe, where a forward-rolling roller, which packs the pile into the wedge
-#: under it, leaves the only free room (docs/scene.md: The feed).
+#: under it, leaves the only free room (docs/scene.md: Feed).
 FEED_AHEAD_OF_FRONT_DIAMETERS = 1.0
 
 
