@@ -115,7 +115,7 @@ def test_spread_lays_powder_past_the_heap_and_loses_nothing(smoke):
     assert layer.z.max() < s.roller_gap + 0.1e-3
 
 
-def test_feed_tops_the_pile_up_from_above_and_never_ahead_of_its_front(smoke):
+def test_feed_tops_the_pile_up_on_its_slope_and_never_past_its_reach(smoke):
     """The feed places new particles on the pile and its front slope, at most
     FEED_AHEAD_OF_FRONT_DIAMETERS largest diameters ahead of the pile's front (measured by LIGGGHTS at
     each top-up), so none lands on bare bed farther ahead: read back from the top-ups' printed fronts
