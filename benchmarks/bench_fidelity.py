@@ -80,6 +80,8 @@ VARIANTS = {
     "E5e6": {"LEVEL.youngs_modulus_dem_Pa": 5.0e6},
     "E5e7": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7},
     "E1e8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8},
+    "E2e8": {"LEVEL.youngs_modulus_dem_Pa": 2.0e8},
+    "E4e8": {"LEVEL.youngs_modulus_dem_Pa": 4.0e8},
     # the fed scene's size and supply at 20 MPa (docs/scene_size.md: At the converged stiffness)
     "E2e7+strip2.5": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 2.5,
                       "LEVEL.heap_particles": 3800},
@@ -91,6 +93,9 @@ VARIANTS = {
                              "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
     # the reference one step stiffer: does the stiffness shift of the default's scene hold on the bigger one?
     "E5e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7, "LEVEL.strip_width_mm": 2.5,
+                             "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
+    # the big scene at the stiffness where the default's scene stops moving (100 against 200 MPa)
+    "E1e8+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, "LEVEL.strip_width_mm": 2.5,
                              "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
     # the width one step past the 2.5 mm strip (28 mean diameters), the pile's 20 mg/mm over 5 mm
     "E2e7+strip5": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 5.0,
