@@ -94,7 +94,7 @@ VARIANTS = {
     # the reference one step stiffer: does the stiffness shift of the default's scene hold on the bigger one?
     "E5e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7, "LEVEL.strip_width_mm": 2.5,
                              "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
-    # the big scene at the stiffness where the default's scene stops moving (100 against 200 MPa)
+    # the big scene one step stiffer again: converged in stiffness (50 against 100 MPa)? The omega -15 reference
     "E1e8+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, "LEVEL.strip_width_mm": 2.5,
                              "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
     # the width one step past the 2.5 mm strip (28 mean diameters), the pile's 20 mg/mm over 5 mm
