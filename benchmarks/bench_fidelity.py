@@ -47,6 +47,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
 
+#: The big scene of the stiffness ladder: a 2.5 mm strip (14 mean diameters) with a 40 mg/mm pile.
+BIG_SCENE = {"LEVEL.strip_width_mm": 2.5, "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580}
+
 #: Config overrides (dotted keys; ``LEVEL`` stands for the benchmarked level's
 #: fidelity block, whose ``youngs_modulus_dem_Pa`` wins over the material's). "default" is the
 #: level as configured.
@@ -89,14 +92,11 @@ VARIANTS = {
                     "LEVEL.heap_particles": 3640},
     "E2e7+region6": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.sampling_length_mm": 6.0},
     # both unconverged knobs turned together: the reference the default is judged against
-    "E2e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 2.5,
-                             "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
+    "E2e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, **BIG_SCENE},
     # the reference one step stiffer: does the stiffness shift of the default's scene hold on the bigger one?
-    "E5e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7, "LEVEL.strip_width_mm": 2.5,
-                             "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
+    "E5e7+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7, **BIG_SCENE},
     # the big scene one step stiffer again: converged in stiffness (50 against 100 MPa)? The omega -15 reference
-    "E1e8+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, "LEVEL.strip_width_mm": 2.5,
-                             "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580},
+    "E1e8+strip2.5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE},
     # the width one step past the 2.5 mm strip (28 mean diameters), the pile's 20 mg/mm over 5 mm
     "E2e7+strip5": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 5.0,
                     "LEVEL.heap_particles": 7580},
