@@ -17,6 +17,7 @@ and ``.png`` (largest shift against CPU relative to ``--default``).
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -34,6 +35,13 @@ STEPS = {
     ("E5e6", "E2e7"): "stiffness 5 -> 20 MPa",
     ("E2e7", "E5e7"): "stiffness 20 -> 50 MPa",
     ("E5e7", "E1e8"): "stiffness 50 -> 100 MPa",
+    ("E2e7", "E1e8"): "stiffness 20 -> 100 MPa",
+    ("E1e8", "E2e8"): "stiffness 100 -> 200 MPa",
+    ("E2e8", "E4e8"): "stiffness 200 -> 400 MPa",
+    ("E2e7+strip2.5+pile40", "E5e7+strip2.5+pile40"): "stiffness 20 -> 50 MPa (2.5 mm, 40 mg/mm)",
+    ("E5e7+strip2.5+pile40", "E1e8+strip2.5+pile40"): "stiffness 50 -> 100 MPa (2.5 mm, 40 mg/mm)",
+    ("E1e8", "E1e8+strip2.5+pile40"): "strip 1.2 -> 2.5 mm and pile 20 -> 40 mg/mm (100 MPa)",
+    ("E2e7", "E1e8+strip2.5+pile40"): "the default (20 MPa, 1.2 mm, 20 mg/mm) -> 100 MPa, 2.5 mm, 40 mg/mm",
     ("E2e7", "E2e7+strip2.5"): "strip 1.2 -> 2.5 mm (20 MPa)",
     ("E2e7", "E2e7+pile40"): "pile 20 -> 40 mg/mm (20 MPa)",
     ("E2e7", "feed0.25"): "top-up every 0.5 -> 0.25 mm (20 MPa)",
@@ -109,6 +117,8 @@ def main(argv=None) -> int:
     parser.add_argument("--renamed", default="E5e6", help="what a variant called `default` in them was")
     parser.add_argument("--default", default="E2e7", help="the variant that is the default scene")
     parser.add_argument("--name", default="reference_front")
+    parser.add_argument("--powder", default="",
+                        help="what the runs' config was (a sentence for the table's page), e.g. the calibrated powder")
     args = parser.parse_args(argv)
     paths = [args.measured / name for name in args.runs.split(",")]
     missing = [str(p) for p in paths if not p.is_file()]
@@ -124,7 +134,10 @@ def main(argv=None) -> int:
     text = (f"# The default scene against bigger, stiffer, better-supplied ones\n\n"
             f"Summarised {time.strftime('%Y-%m-%d')} at commit {commit()} from the fidelity benchmark's runs "
             f"({args.runs}, U = 70 mm/s, 3 seeds each), by\n`.venv/bin/python benchmarks/reference_front.py "
-            f"--runs {args.runs}`.\n\nEach knob turned one step from the coarser scene to the finer one; a shift "
+            f"--runs {args.runs} --renamed {args.renamed} --name {args.name}"
+            + (f" --powder {shlex.quote(args.powder)}" if args.powder else "") + "`.\n\n"
+            + (f"{args.powder}\n\n" if args.powder else "")
+            + "Each knob turned one step from the coarser scene to the finer one; a shift "
             "is the largest over the points of |coarser - finer| in the finer scene's pooled seed sd (converged: "
             "every metric within 1), a change the mean of 100 (coarser - finer) / finer. CPU: LIGGGHTS' own per "
             f"run, relative to `{args.default}` (the default scene) on the same points; the CSVs were measured "
