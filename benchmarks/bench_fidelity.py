@@ -102,9 +102,11 @@ VARIANTS = {
                     "LEVEL.heap_particles": 7580},
     # the gap as built: a 180-facet roller (sagitta 2.3 um) against the default 90 (sagitta 9.1 um)
     "facets180": {"roller.facets_around": 180},
-    # the feed at the 20 MPa default: top-ups twice as often, and no feed from a heap that lasts
-    # (40 mg/mm: the pile's 20 plus the 18 mg/mm forward rolling lays over the 13 mm travel at omega -15)
+    # the feed: top-ups every 0.25 mm (the default level's interval, so in new runs the same scene as
+    # `default`) and every 0.5 mm (the other levels'), and no feed from a heap that lasts (40 mg/mm: the
+    # pile's 20 plus the 18 mg/mm forward rolling laid over the 13 mm travel at omega -15 before calibration)
     "feed0.25": {"LEVEL.feed_every_mm": 0.25},
+    "feed0.5": {"LEVEL.feed_every_mm": 0.5},
     "unfed40": {"LEVEL.feed_pile_mg_per_mm": None, "LEVEL.heap_particles": 3640},
     # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction
     "dt0.5": {"timestep.rayleigh_fraction": 0.5},
