@@ -323,9 +323,15 @@ def test_travel_is_cut_at_checkpoints_and_feeds_and_resumes_after_them():
     assert travel_segments(100, [], []) == [{"start": 0, "end": 100, "feed": False, "checkpoint": None}]
 
 
-def test_feed_starts_once_its_zone_covers_the_heap_and_repeats_every_half_mm(config):
+def test_feed_starts_once_its_zone_covers_the_heap_and_repeats_every_feed_every_mm(config):
     from dataclasses import replace
-    s = replace(scene(config, "default"), feed_pile_mass=1e-5, feed_length=8e-3)
+
+    def with_interval(mm):
+        level = {**config["fidelity"]["default"], "feed_every_mm": mm}
+        cfg = {**config, "fidelity": {**config["fidelity"], "default": level}}
+        return replace(scene(cfg, "default"), feed_pile_mass=1e-5, feed_length=8e-3)
+
+    s = with_interval(0.5)
     speed = 0.1                                      # m/s
     every = round(0.5e-3 / (speed * s.timestep))     # steps per 0.5 mm of travel
     plan = feed_plan(s, x0=-0.01, speed=speed, travel_steps=40 * every, heap_toe=0.003)
@@ -333,11 +339,10 @@ def test_feed_starts_once_its_zone_covers_the_heap_and_repeats_every_half_mm(con
     assert -0.01 + 8e-3 + speed * s.timestep * first == pytest.approx(0.003, abs=speed * s.timestep)
     assert np.all(np.diff(plan) == every) and plan[-1] < 40 * every
     assert feed_plan(replace(s, feed_pile_mass=None), -0.01, speed, 1000, 0.003) == []   # no feed configured
-    quarter = {**config, "fidelity": {**config["fidelity"], "default": {**config["fidelity"]["default"],
-                                                                        "feed_every_mm": 0.25}}}
-    s4 = replace(scene(quarter, "default"), feed_pile_mass=1e-5, feed_length=8e-3)
-    denser = feed_plan(s4, x0=-0.01, speed=speed, travel_steps=40 * every, heap_toe=0.003)
+    denser = feed_plan(with_interval(0.25), x0=-0.01, speed=speed, travel_steps=40 * every, heap_toe=0.003)
     assert denser[0] == first and np.all(np.diff(denser) == round(0.25e-3 / (speed * s.timestep)))
+    # the shipped default level tops up every 0.25 mm (docs/scene_size.md: the reference at omega 0 and +10)
+    assert config["fidelity"]["default"]["feed_every_mm"] == 0.25
 
 
 def test_processors_grid_cuts_a_strip_across_its_width(config):
