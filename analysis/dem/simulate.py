@@ -450,7 +450,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
     it); a checkpoint that fails to load is skipped, and the run starts over.
 
     With ``feed_pile_mg_per_mm`` in the fidelity level, the pile ahead of the
-    roller is topped up to that mass every ``feed_every_mm`` (0.5 mm) of travel
+    roller is topped up to that mass every ``feed_every_mm`` of travel
     (:func:`feed_plan`, :func:`feed_zone`): the layer is laid from a pile of
     a set size, however much the roller lays; ``fed_particles`` in the
     health counts what was added. ``replicate`` seeds the feed.
