@@ -103,8 +103,9 @@ VARIANTS = {
     "E2e7+strip5": {"LEVEL.youngs_modulus_dem_Pa": 2.0e7, "LEVEL.strip_width_mm": 5.0,
                     "LEVEL.heap_particles": 7580},
     # the gap as built: a 180-facet roller (sagitta 2.3 um) against the default 90 (sagitta 9.1 um)
-    "facets180": {"roller.facets_around": 180},
-    "facets180+feed0.25": {"roller.facets_around": 180, "LEVEL.feed_every_mm": 0.25},  # both knobs of the default
+    # (its runs before the default's 0.25 mm top-ups, with 0.5 mm ones), and with the default's top-ups
+    "facets180": {"roller.facets_around": 180, "LEVEL.feed_every_mm": 0.5},
+    "facets180+feed0.25": {"roller.facets_around": 180, "LEVEL.feed_every_mm": 0.25},
     # the feed: top-ups every 0.25 mm (the default level's interval, so in new runs the same scene as
     # `default`) and every 0.5 mm (the other levels'), and no feed from a heap that lasts (40 mg/mm: the
     # pile's 20 plus the 18 mg/mm forward rolling laid over the 13 mm travel at omega -15 before calibration)
