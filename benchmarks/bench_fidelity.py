@@ -116,6 +116,10 @@ VARIANTS = {
     "dt0.5": {"timestep.rayleigh_fraction": 0.5},
     # the smoke level's pile for the calibrated powder (benchmarks/measured/smoke_pile15.md)
     "pile15": {"LEVEL.feed_pile_mg_per_mm": 15, "LEVEL.heap_particles": 1140},
+    # the 40 mg/mm pile that matches the reference at U 100 but lays too much at U 70, stiffened toward it
+    # (docs/scene_size.md: At the calibrated powder: U = 100 mm/s)
+    "E5e7+pile40": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7, "LEVEL.feed_pile_mg_per_mm": 40,
+                    "LEVEL.heap_particles": 3640},
 }
 
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).
