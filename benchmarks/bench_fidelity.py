@@ -120,6 +120,8 @@ VARIANTS = {
     # (docs/scene_size.md: At the calibrated powder: U = 100 mm/s)
     "E5e7+pile40": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7, "LEVEL.feed_pile_mg_per_mm": 40,
                     "LEVEL.heap_particles": 3640},
+    # between the default's 20 mg/mm pile (rough at U 100) and 40 (too much at U 70)
+    "pile30": {"LEVEL.feed_pile_mg_per_mm": 30, "LEVEL.heap_particles": 2730},
 }
 
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).
