@@ -49,10 +49,22 @@ METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "p
 
 #: The big scene of the stiffness ladder: a 2.5 mm strip (14 mean diameters) with a 40 mg/mm pile,
 #: topped up every 0.5 mm as every run of it was (the default level's own interval may change).
-BIG_SCENE = {"LEVEL.strip_width_mm": 2.5, "LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 7580,
-             "LEVEL.feed_every_mm": 0.5}
+#: Particles in a mg of the default powder's dose (the default level's 1,820 for 20 mg/mm over 1.2 mm).
+PARTICLES_PER_MG = 1820 / (20 * 1.2)
+
+
+def pile(mg_per_mm, strip_width_mm=1.2):
+    """Overrides for a pile of ``mg_per_mm`` (mg per mm of width) on a strip of ``strip_width_mm`` (mm).
+
+    The heap is dosed at the pile's mass (``heap_particles``, rounded to tens) and the feed then holds it.
+    """
+    return {"LEVEL.feed_pile_mg_per_mm": mg_per_mm,
+            "LEVEL.heap_particles": int(round(mg_per_mm * strip_width_mm * PARTICLES_PER_MG, -1))}
+
+
+BIG_SCENE = {"LEVEL.strip_width_mm": 2.5, **pile(40, 2.5), "LEVEL.feed_every_mm": 0.5}
 #: The default's 1.2 mm strip with the reference's 40 mg/mm pile (its particles settled from the start).
-PILE40 = {"LEVEL.feed_pile_mg_per_mm": 40, "LEVEL.heap_particles": 3640}
+PILE40 = pile(40)
 
 #: Config overrides (dotted keys; ``LEVEL`` stands for the benchmarked level's
 #: fidelity block, whose ``youngs_modulus_dem_Pa`` wins over the material's). "default" is the
@@ -116,12 +128,15 @@ VARIANTS = {
     # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction
     "dt0.5": {"timestep.rayleigh_fraction": 0.5},
     # the smoke level's pile for the calibrated powder (benchmarks/measured/smoke_pile15.md)
-    "pile15": {"LEVEL.feed_pile_mg_per_mm": 15, "LEVEL.heap_particles": 1140},
+    "pile15": pile(15, 1.0),
     # the 40 mg/mm pile (within the reference at U 100, too much at U 70) stiffened: rough again at U 100
     # (docs/scene_size.md: At the calibrated powder: U = 100 mm/s)
     "E5e7+pile40": {"LEVEL.youngs_modulus_dem_Pa": 5.0e7, **PILE40},
     # between the default's 20 mg/mm pile (rough at U 100) and 40 (too much at U 70)
-    "pile30": {"LEVEL.feed_pile_mg_per_mm": 30, "LEVEL.heap_particles": 2730},
+    "pile30": pile(30),
+    # one step past the 40 mg/mm pile (the feed's wedge ahead of the roller holds twice at most 53 mg/mm):
+    # is the layer converged in the pile at 40?
+    "pile50": pile(50),
 }
 
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).

@@ -198,3 +198,29 @@ def test_a_map_is_compared_with_a_run_tables_seed_means_at_the_points_it_ran(tmp
     with pytest.raises(SystemExit):
         compare_maps.main([str(tmp_path / "c.csv"), str(tmp_path / "new.csv"), "--old-means", "5 MPa",
                            "--out", str(tmp_path)])
+
+
+def test_the_reference_level_is_the_scene_the_benchmarks_judge_the_default_against():
+    """config.yaml's `reference` level and bench_fidelity's reference variant (the default level with
+    100 MPa, a 2.5 mm strip and a 40 mg/mm pile) are one scene: every physical field alike."""
+    from dataclasses import fields
+
+    from analysis.config.fidelity import scene
+    from analysis.config.load import load_config
+
+    config = load_config(bench_fidelity.ROOT / "config.yaml")
+    level = scene(config, "reference")
+    variant = scene(bench_fidelity.variant_config(config, "default", bench_fidelity.VARIANTS["E1e8+strip2.5+pile40"]),
+                    "default")
+    cluster_only = {"level", "runtime_min", "mem_mb_per_rank"}
+    differ = {f.name for f in fields(level) if getattr(level, f.name) != getattr(variant, f.name)}
+    assert differ == cluster_only
+    assert level.youngs_modulus == pytest.approx(1.0e8) and level.strip_width == pytest.approx(2.5e-3)
+    assert bench_fidelity.pile(40, 2.5)["LEVEL.heap_particles"] == level.heap_particles == 7580
+
+
+def test_a_pile_is_dosed_at_its_mass_per_width():
+    """pile(): the default level's 1,820 particles for 20 mg/mm over 1.2 mm, in proportion."""
+    assert bench_fidelity.pile(20) == {"LEVEL.feed_pile_mg_per_mm": 20, "LEVEL.heap_particles": 1820}
+    assert bench_fidelity.pile(50)["LEVEL.heap_particles"] == 4550
+    assert bench_fidelity.pile(15, 1.0)["LEVEL.heap_particles"] == 1140
