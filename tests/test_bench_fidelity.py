@@ -31,6 +31,9 @@ def test_a_step_is_judged_in_the_finer_scenes_sd_not_the_coarser_ones():
     assert step["R_q change (%)"] == pytest.approx(5.0)
     assert step["M_s shift (finer sds)"] == pytest.approx(0.0, abs=1e-9)
     assert not step["converged"]
+    # how much of the shift the seed noise of two 3-packing means could make: 4 um over sqrt(16^2/3 + 1.6^2/3)
+    assert step["largest Welch t"] == pytest.approx(4.0 / np.sqrt(16.0**2 / 3 + 1.6**2 / 3))
+    assert step["at"] == "R_q, U 70, omega -15"
     # the same shift judged in the noisy scene's sd would pass: the order matters
     (back,) = convergence(runs, ["stiff", "soft"]).to_dict("records")
     assert back["R_q shift (finer sds)"] == pytest.approx(4.0 / 16.0) and back["converged"]
