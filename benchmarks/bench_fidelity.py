@@ -388,7 +388,8 @@ def main(argv=None) -> int:
                  "pooled seed sds of the finer scene, and its mean relative change; converged: every "
                  "metric within 1 sd. Largest Welch t: the largest over the points and metrics of the shift over the "
                  "standard error of the two means (absolute; seed noise alone puts about one comparison in eight "
-                 "above 2 with 3 packings a side), and where.\n\n" + steps.to_markdown(index=False, floatfmt=".2f") + "\n")
+                 "above 2 with 3 packings a side), and where.\n\n"
+                 + steps.to_markdown(index=False, floatfmt=".2f") + "\n")
     (out / f"{args.name}.md").write_text(text)
     print(text)
     return 0
