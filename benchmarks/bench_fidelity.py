@@ -282,7 +282,8 @@ def convergence(runs: pd.DataFrame, ladder: list[str]) -> pd.DataFrame:
         rel = (shift / means.loc[b].loc[shift.index]).mean()
         t = (shift.abs() / (sds.loc[a] ** 2 / counts.loc[a] + sds.loc[b] ** 2 / counts.loc[b])
              .loc[shift.index] ** 0.5).stack().dropna()
-        at = "{}, U {:g}, omega {:g}".format(METRICS[t.idxmax()[2]], *t.idxmax()[:2]) if len(t) else ""
+        U, omega, metric = t.idxmax() if len(t) else (None, None, None)
+        at = f"{METRICS[metric]}, U {U:g}, omega {omega:g}" if len(t) else ""
         rows.append({"step": f"{a} -> {b}", "points": len(shift), "finer seeds": int(runs.loc[
                          runs["variant"] == b, "seed"].nunique()),
                      **{f"{METRICS[k]} shift (finer sds)": in_sd[k] for k in METRICS},
