@@ -137,6 +137,9 @@ VARIANTS = {
     # one step past the 40 mg/mm pile (the feed's wedge ahead of the roller holds twice at most 53 mg/mm):
     # is the layer converged in the pile at 40?
     "pile50": pile(50),
+    # the reference one step wider (28 mean diameters) at the calibrated powder: is its 2.5 mm strip converged?
+    "E1e8+strip5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.strip_width_mm": 5.0,
+                           **pile(40, 5.0)},
 }
 
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).

@@ -227,3 +227,22 @@ def test_a_pile_is_dosed_at_its_mass_per_width():
     assert bench_fidelity.pile(20) == {"LEVEL.feed_pile_mg_per_mm": 20, "LEVEL.heap_particles": 1820}
     assert bench_fidelity.pile(50)["LEVEL.heap_particles"] == 4550
     assert bench_fidelity.pile(15, 1.0)["LEVEL.heap_particles"] == 1140
+
+
+def test_the_wider_reference_is_the_reference_one_step_wider_at_the_same_pile_per_width():
+    """E1e8+strip5+pile40 changes the reference's strip (2.5 -> 5 mm) and its heap in proportion, nothing else."""
+    from dataclasses import fields
+
+    from analysis.config.fidelity import scene
+    from analysis.config.load import load_config
+
+    config = load_config(bench_fidelity.ROOT / "config.yaml")
+    reference, wider = (scene(bench_fidelity.variant_config(config, "default", bench_fidelity.VARIANTS[name]),
+                              "default") for name in ("E1e8+strip2.5+pile40", "E1e8+strip5+pile40"))
+    differ = {f.name for f in fields(reference) if getattr(reference, f.name) != getattr(wider, f.name)}
+    # the heap's, region's, box's and pile's extents and masses follow the strip; nothing physical else moves
+    assert differ == {"strip_width", "heap_particles", "heap", "sampling_region", "box", "substrate_x",
+                      "feed_pile_mass"}
+    assert wider.strip_width == pytest.approx(5e-3) and wider.heap_particles == 15170
+    assert wider.feed_pile_mass == pytest.approx(2 * reference.feed_pile_mass)  # 40 mg/mm over twice the width
+    assert wider.sampling_region[3] == pytest.approx(5e-3)
