@@ -203,11 +203,16 @@ def test_a_map_is_compared_with_a_run_tables_seed_means_at_the_points_it_ran(tmp
                            "--out", str(tmp_path)])
 
 
+def fields_that_differ(a, b) -> set[str]:
+    """The names of the fields in which two scenes (dataclasses of one type) differ."""
+    from dataclasses import fields
+
+    return {f.name for f in fields(a) if getattr(a, f.name) != getattr(b, f.name)}
+
+
 def test_the_reference_level_is_the_scene_the_benchmarks_judge_the_default_against():
     """config.yaml's `reference` level and bench_fidelity's reference variant (the default level with
     100 MPa, a 2.5 mm strip and a 40 mg/mm pile) are one scene: every physical field alike."""
-    from dataclasses import fields
-
     from analysis.config.fidelity import scene
     from analysis.config.load import load_config
 
@@ -216,8 +221,7 @@ def test_the_reference_level_is_the_scene_the_benchmarks_judge_the_default_again
     variant = scene(bench_fidelity.variant_config(config, "default", bench_fidelity.VARIANTS["E1e8+strip2.5+pile40"]),
                     "default")
     cluster_only = {"level", "runtime_min", "mem_mb_per_rank"}
-    differ = {f.name for f in fields(level) if getattr(level, f.name) != getattr(variant, f.name)}
-    assert differ == cluster_only
+    assert fields_that_differ(level, variant) == cluster_only
     assert level.youngs_modulus == pytest.approx(1.0e8) and level.strip_width == pytest.approx(2.5e-3)
     assert bench_fidelity.pile(40, 2.5)["LEVEL.heap_particles"] == level.heap_particles == 7580
 
@@ -231,18 +235,15 @@ def test_a_pile_is_dosed_at_its_mass_per_width():
 
 def test_the_wider_reference_is_the_reference_one_step_wider_at_the_same_pile_per_width():
     """E1e8+strip5+pile40 changes the reference's strip (2.5 -> 5 mm) and its heap in proportion, nothing else."""
-    from dataclasses import fields
-
     from analysis.config.fidelity import scene
     from analysis.config.load import load_config
 
     config = load_config(bench_fidelity.ROOT / "config.yaml")
     reference, wider = (scene(bench_fidelity.variant_config(config, "default", bench_fidelity.VARIANTS[name]),
                               "default") for name in ("E1e8+strip2.5+pile40", "E1e8+strip5+pile40"))
-    differ = {f.name for f in fields(reference) if getattr(reference, f.name) != getattr(wider, f.name)}
     # the heap's, region's, box's and pile's extents and masses follow the strip; nothing physical else moves
-    assert differ == {"strip_width", "heap_particles", "heap", "sampling_region", "box", "substrate_x",
-                      "feed_pile_mass"}
+    assert fields_that_differ(reference, wider) == {"strip_width", "heap_particles", "heap", "sampling_region",
+                                                    "box", "substrate_x", "feed_pile_mass"}
     assert wider.strip_width == pytest.approx(5e-3) and wider.heap_particles == 15170
     assert wider.feed_pile_mass == pytest.approx(2 * reference.feed_pile_mass)  # 40 mg/mm over twice the width
     assert wider.sampling_region[3] == pytest.approx(5e-3)
