@@ -20,10 +20,12 @@ new DEM:
   shift from the level's own region is the region's bias.
 
 Each region spans ``start-end`` [mm] along the spreading direction
-(``--regions``; the level's own region is always one of them); its width is
-the level's. M_s is scaled to the level's own region area (mass per
-area), so that every region's numbers read in the same units; Q_s, R_q and
-Phi do not depend on the area.
+(``--regions``; the level's own region is always one of them); across it,
+the replicates' region spans the kept variant's own (a wider variant's layer
+is measured over its whole strip, as ``bench_fidelity.py`` measured it), the
+map's the level's. M_s is scaled to the level's own region area (mass per
+area), so that every region's and variant's numbers read in the same units;
+Q_s, R_q and Phi do not depend on the area.
 
 Writes ``<name>.csv`` (one row per layer and region) and ``<name>.md``: per
 region, the pooled seed sd of each metric (% of its mean), the noise
@@ -51,7 +53,7 @@ from analysis.config.load import load_config  # noqa: E402
 from analysis.metrics.dump import read_dump  # noqa: E402
 from analysis.metrics.noise_floor import POOLED, noise_floor  # noqa: E402
 from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units  # noqa: E402
-from benchmarks.bench_fidelity import METRICS  # noqa: E402
+from benchmarks.bench_fidelity import METRICS, VARIANTS, variant_config  # noqa: E402
 
 KEPT = re.compile(r"(?P<variant>.+)_s(?P<seed>\d+)_U(?P<U>[-\d.]+)_w(?P<omega>[-\d.]+)$")
 MAP_RUN = re.compile(r"U(?P<U>[-\d.]+)_w(?P<omega>[-\d.]+)_r(?P<seed>\d+)$")
@@ -81,7 +83,7 @@ def measure(task) -> list[dict]:
     layer, regions, area_ref, density, n_lines, seed = task
     frame = read_dump(layer["dump"])
     rows = []
-    for label, region in regions:
+    for label, region in regions[layer["source"]]:
         try:
             report = to_report_units(spread_layer_metrics(
                 frame, region, layer["U_mm_s"] * 1e-3, density, substrate=layer["substrate"],
@@ -139,17 +141,21 @@ def main(argv=None) -> int:
     parser.add_argument("--replicates", type=Path, default=None, help="bench_fidelity.py --keep's folder")
     parser.add_argument("--map", type=Path, default=None, help="a map's runs folder (results/<level>/runs)")
     parser.add_argument("--level", default="default")
-    parser.add_argument("--variant", default="default", help="the kept variant whose replicates give the noise")
+    parser.add_argument("--variant", default="default",
+                        help="the kept variant (bench_fidelity.py's) whose replicates give the noise")
     parser.add_argument("--regions", default="4-9,5-9,6-10,6-12", help="regions start-end [mm], comma-separated")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--name", default="region_noise")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     args = parser.parse_args(argv)
+    if args.variant not in VARIANTS:
+        parser.error(f"--variant: {args.variant!r} is not one of bench_fidelity.py's variants")
     config = load_config(ROOT / "config.yaml")
     s = scene(config, args.level)
     x0, x1, y0, y1 = s.sampling_region
+    kept_y = scene(variant_config(config, args.level, VARIANTS[args.variant]), args.level).sampling_region[2:]
     own = f"{x0 * 1e3:g}-{x1 * 1e3:g}"
-    regions = {own: (x0, x1, y0, y1)}
+    regions = {own: (x0, x1)}
     for label in args.regions.split(","):
         try:
             a, b = (float(v) for v in label.split("-"))
@@ -157,8 +163,9 @@ def main(argv=None) -> int:
             parser.error(f"--regions: {label!r} is not start-end in mm (e.g. 6-12)")
         if not b > a:
             parser.error(f"--regions: {label!r} ends before it starts")
-        regions[f"{a:g}-{b:g}"] = (a * 1e-3, b * 1e-3, y0, y1)
-    regions = list(regions.items())
+        regions[f"{a:g}-{b:g}"] = (a * 1e-3, b * 1e-3)
+    regions = {source: [(label, (*x, *y)) for label, x in regions.items()]
+               for source, y in (("replicates", kept_y), ("map", (y0, y1)))}
     found = layers(args.replicates, args.map, args.variant)
     if not found:
         parser.error(f"no layers found under --replicates {args.replicates} (variant {args.variant!r}) "

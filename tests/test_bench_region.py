@@ -32,3 +32,33 @@ def test_a_region_is_scored_by_its_seed_sd_the_maps_spread_and_its_shift_from_th
     assert table.loc["6-12", "M_s_rep_shift_sd"] == pytest.approx(0.2)  # paired: +0.7, +0.2, -0.3
     assert table.loc["6-9", "M_s_map_shift_sd"] == 0.0
     assert table.loc["6-12", "Q_s_map_shift_sd"] == pytest.approx(0.5)  # every metric scaled alike here
+
+
+def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_levels_area(tmp_path):
+    """A kept layer of ``E1e8+strip2.5+pile40`` at the smoke level (a 2.5 mm strip; the level's is 1 mm):
+    a square lattice of 100 um spheres covers only y = 1.2-2.4 mm, so the level's 1 mm region would hold
+    none of it. Over the variant's strip, M_s per the level's region area is 1.2 / 2.5 of the lattice's
+    areal mass (it covers that share of the strip), whatever the region's length."""
+    import trimesh
+
+    from analysis.metrics.dump import write_dump
+    from benchmarks import bench_region
+    r, rho = 50e-6, 4430.0
+    layer = tmp_path / "kept" / "E1e8+strip2.5+pile40_s0_U70_w-15"
+    layer.mkdir(parents=True)
+    x, y = np.meshgrid(np.arange(0.05e-3, 10e-3, 2 * r), 1.2e-3 + r + 2 * r * np.arange(12))
+    atoms = pd.DataFrame({"id": np.arange(1, x.size + 1), "x": x.ravel(), "y": y.ravel(), "z": r, "radius": r})
+    write_dump(layer / "final.dump", atoms, [[-1e-3, 11e-3], [0.0, 2.5e-3], [-1e-3, 5e-3]])
+    trimesh.Trimesh([[-0.01, -0.01, 0], [0.02, -0.01, 0], [0.02, 0.01, 0], [-0.01, 0.01, 0]],
+                    [[0, 1, 2], [0, 2, 3]]).export(layer / "substrate.stl")
+    assert bench_region.main(["--replicates", str(tmp_path / "kept"), "--level", "smoke",
+                              "--variant", "E1e8+strip2.5+pile40", "--regions", "4.5-7.5", "--jobs", "1",
+                              "--name", "wide", "--out", str(tmp_path)]) == 0
+    measured = pd.read_csv(tmp_path / "wide.csv").set_index("region_mm")
+    areal = rho * 4 / 3 * np.pi * r**3 / (2 * r) ** 2  # the lattice's mass per area [kg/m^2]
+    level_area = 2e-3 * 1e-3                            # the smoke level's region, 2 x 1 mm
+    for label in ("4.5-6.5", "4.5-7.5"):
+        assert measured.loc[label, "mass_g"] * 1e-3 == pytest.approx(1.2 / 2.5 * areal * level_area, rel=1e-9)
+    assert measured.loc["4.5-6.5", "roughness_um"] > 0  # bare bed beside the lattice: not a flat top
+    with pytest.raises(SystemExit):
+        bench_region.main(["--replicates", str(tmp_path / "kept"), "--variant", "strip9"])
