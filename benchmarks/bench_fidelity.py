@@ -140,6 +140,9 @@ VARIANTS = {
     # the reference one step wider (28 mean diameters) at the calibrated powder: is its 2.5 mm strip converged?
     "E1e8+strip5+pile40": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.strip_width_mm": 5.0,
                            **pile(40, 5.0)},
+    # the reference with its heap dosed 4 mm further back (its slumped toe near x = 1.5 mm, not 5.5): is the
+    # layer over the region the pile's steady layer or the end of the cut heap's thicker one?
+    "E1e8+strip2.5+pile40+heap-8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.heap_start_mm": -8.0},
 }
 
 #: Health figures of a spread recorded beside its metrics (analysis.dem.health).

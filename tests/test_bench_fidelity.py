@@ -247,3 +247,18 @@ def test_the_wider_reference_is_the_reference_one_step_wider_at_the_same_pile_pe
     assert wider.strip_width == pytest.approx(5e-3) and wider.heap_particles == 15170
     assert wider.feed_pile_mass == pytest.approx(2 * reference.feed_pile_mass)  # 40 mg/mm over twice the width
     assert wider.sampling_region[3] == pytest.approx(5e-3)
+
+
+def test_the_shifted_heap_is_the_reference_with_a_longer_run_in_and_nothing_else():
+    """E1e8+strip2.5+pile40+heap-8 doses the reference's heap 4 mm further back: the box and its bed grow
+    behind it, the region and the roller's stop stay where they are, nothing physical moves."""
+    from analysis.config.fidelity import scene
+    from analysis.config.load import load_config
+
+    config = load_config(bench_fidelity.ROOT / "config.yaml")
+    reference, shifted = (scene(bench_fidelity.variant_config(config, "default", bench_fidelity.VARIANTS[name]),
+                                "default") for name in ("E1e8+strip2.5+pile40", "E1e8+strip2.5+pile40+heap-8"))
+    assert fields_that_differ(reference, shifted) == {"heap", "box", "substrate_x"}  # the bed spans the box
+    assert shifted.heap[0] == pytest.approx(reference.heap[0] - 4e-3)
+    assert shifted.box[0] == pytest.approx(reference.box[0] - 4e-3) and shifted.box[1:] == reference.box[1:]
+    assert shifted.sampling_region == reference.sampling_region and shifted.travel_end == reference.travel_end
