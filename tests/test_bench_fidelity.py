@@ -210,6 +210,16 @@ def fields_that_differ(a, b) -> set[str]:
     return {f.name for f in fields(a) if getattr(a, f.name) != getattr(b, f.name)}
 
 
+def variant_scenes(*names):
+    """The default level's scene under each of bench_fidelity's variants ``names``."""
+    from analysis.config.fidelity import scene
+    from analysis.config.load import load_config
+
+    config = load_config(bench_fidelity.ROOT / "config.yaml")
+    return tuple(scene(bench_fidelity.variant_config(config, "default", bench_fidelity.VARIANTS[name]), "default")
+                 for name in names)
+
+
 def test_the_reference_level_is_the_scene_the_benchmarks_judge_the_default_against():
     """config.yaml's `reference` level and bench_fidelity's reference variant (the default level with
     100 MPa, a 2.5 mm strip and a 40 mg/mm pile) are one scene: every physical field alike."""
@@ -235,12 +245,7 @@ def test_a_pile_is_dosed_at_its_mass_per_width():
 
 def test_the_wider_reference_is_the_reference_one_step_wider_at_the_same_pile_per_width():
     """E1e8+strip5+pile40 changes the reference's strip (2.5 -> 5 mm) and its heap in proportion, nothing else."""
-    from analysis.config.fidelity import scene
-    from analysis.config.load import load_config
-
-    config = load_config(bench_fidelity.ROOT / "config.yaml")
-    reference, wider = (scene(bench_fidelity.variant_config(config, "default", bench_fidelity.VARIANTS[name]),
-                              "default") for name in ("E1e8+strip2.5+pile40", "E1e8+strip5+pile40"))
+    reference, wider = variant_scenes("E1e8+strip2.5+pile40", "E1e8+strip5+pile40")
     # the heap's, region's, box's and pile's extents and masses follow the strip; nothing physical else moves
     assert fields_that_differ(reference, wider) == {"strip_width", "heap_particles", "heap", "sampling_region",
                                                     "box", "substrate_x", "feed_pile_mass"}
@@ -252,12 +257,7 @@ def test_the_wider_reference_is_the_reference_one_step_wider_at_the_same_pile_pe
 def test_the_shifted_heap_is_the_reference_with_a_longer_run_in_and_nothing_else():
     """E1e8+strip2.5+pile40+heap-8 doses the reference's heap 4 mm further back: the box and its bed grow
     behind it, the region and the roller's stop stay where they are, nothing physical moves."""
-    from analysis.config.fidelity import scene
-    from analysis.config.load import load_config
-
-    config = load_config(bench_fidelity.ROOT / "config.yaml")
-    reference, shifted = (scene(bench_fidelity.variant_config(config, "default", bench_fidelity.VARIANTS[name]),
-                                "default") for name in ("E1e8+strip2.5+pile40", "E1e8+strip2.5+pile40+heap-8"))
+    reference, shifted = variant_scenes("E1e8+strip2.5+pile40", "E1e8+strip2.5+pile40+heap-8")
     assert fields_that_differ(reference, shifted) == {"heap", "box", "substrate_x"}  # the bed spans the box
     assert shifted.heap[0] == pytest.approx(reference.heap[0] - 4e-3)
     assert shifted.box[0] == pytest.approx(reference.box[0] - 4e-3) and shifted.box[1:] == reference.box[1:]
