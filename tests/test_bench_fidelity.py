@@ -262,3 +262,18 @@ def test_the_shifted_heap_is_the_reference_with_a_longer_run_in_and_nothing_else
     assert shifted.heap[0] == pytest.approx(reference.heap[0] - 4e-3)
     assert shifted.box[0] == pytest.approx(reference.box[0] - 4e-3) and shifted.box[1:] == reference.box[1:]
     assert shifted.sampling_region == reference.sampling_region and shifted.travel_end == reference.travel_end
+
+
+def test_the_substrate_swaps_put_one_replicates_powder_on_the_other_replicates_substrate():
+    """substrate+1 at replicate 0 builds replicate 1's substrate, substrate-1 at replicate 1 replicate 0's;
+    the scene (heap, feed, region) is the default's."""
+    from analysis.config.load import load_config
+    from analysis.dem.simulate import substrate_seed
+
+    config = load_config(bench_fidelity.ROOT / "config.yaml")
+    swapped = {name: bench_fidelity.variant_config(config, "default", bench_fidelity.VARIANTS[name])
+               for name in ("substrate+1", "substrate-1")}
+    assert substrate_seed(swapped["substrate+1"], 0) == substrate_seed(config, 1)
+    assert substrate_seed(swapped["substrate-1"], 1) == substrate_seed(config, 0)
+    default, plus, minus = variant_scenes("default", "substrate+1", "substrate-1")
+    assert fields_that_differ(default, plus) == fields_that_differ(default, minus) == {"substrate"}
