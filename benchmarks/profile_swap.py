@@ -2,14 +2,14 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/profile_swap.py CSV [CSV ...] [--name profile_swap]
-        [--out benchmarks/measured]
+    .venv/bin/python benchmarks/profile_swap.py VARIANT=CSV [VARIANT=CSV ...]
+        [--name profile_swap] [--out benchmarks/measured]
 
-Each CSV is a ``bench_region.py`` table of kept layers measured over 1 mm bins
-(``--regions 0-1,1-2,...``): the default's own layers (replicate r: powder r on
-substrate r) and the swapped ones of ``bench_fidelity.py``'s ``substrate+1`` and
-``substrate-1`` variants (powder r on substrate r +- 1). Every layer's
-realisations are read from its variant, not from its name. For each layer whose
+Each CSV is a ``bench_region.py --variant VARIANT`` table of kept layers measured
+over 1 mm bins (``--regions 0-1,1-2,...``): the default's own layers (replicate r:
+powder r on substrate r) and the swapped ones of ``bench_fidelity.py``'s
+``substrate+1`` and ``substrate-1`` variants (powder r on substrate r +- 1). Every
+layer's substrate realisation is read from its variant's config. For each layer whose
 powder and substrate differ, the table gives the root-mean-square difference of
 its deposit profile (M_s per bin, mg per the level's area) from the layer that
 shares its substrate and from the one that shares its powder, over the flat bed
@@ -76,20 +76,19 @@ def swap_distances(profiles: pd.DataFrame) -> pd.DataFrame:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("csv", nargs="+", type=Path, help="bench_region.py tables <name>.csv of kept layers")
+    parser.add_argument("tables", nargs="+", metavar="VARIANT=CSV",
+                        help="a bench_region.py table of kept layers and the variant they were run at")
     parser.add_argument("--name", default="profile_swap")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     args = parser.parse_args(argv)
     config = load_config(ROOT / "config.yaml")
     tables, variants = [], []
-    for path in args.csv:
-        if not path.is_file():
-            parser.error(f"{path}: no such bench_region table")
-        md = path.with_suffix(".md")
-        variant = next((ln.split("(variant `")[1].split("`")[0] for ln in md.read_text().splitlines()
-                        if "(variant `" in ln), None) if md.is_file() else None
-        if variant is None:
-            parser.error(f"{path}: its {md.name} does not name the layers' variant")
+    for arg in args.tables:
+        variant, _, path = arg.partition("=")
+        if variant not in VARIANTS and variant != "default":
+            parser.error(f"{arg!r}: no variant {variant!r} in bench_fidelity (VARIANT=CSV)")
+        if not Path(path).is_file():
+            parser.error(f"{arg!r}: no such bench_region table {path!r}")
         tables.append(pd.read_csv(path))
         variants.append(variant)
     profiles = deposit_profiles(tables, variants, config)
@@ -97,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     if distances.empty:
         parser.error("no swapped layer with both its unswapped layers among the tables")
     args.out.mkdir(parents=True, exist_ok=True)
-    command = " ".join(["benchmarks/profile_swap.py", *[str(p) for p in args.csv], "--name", args.name])
+    command = " ".join(["benchmarks/profile_swap.py", *args.tables, "--name", args.name])
     text = [f"# A layer's profile along the travel: its powder or its substrate? ({date.today()})", "",
             f"Measured on {platform.machine()}, by `.venv/bin/python {command}` (no DEM).", "",
             "Deposit profiles (M_s per 1 mm bin, mg per the default's 3.6 mm^2; bins by their start, mm):", "",

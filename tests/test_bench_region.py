@@ -66,21 +66,22 @@ def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_
 
 def test_a_swapped_layer_is_said_to_follow_the_realisation_its_profile_is_nearer_to(tmp_path):
     """profile_swap: powder 0 on substrate 1 whose profile is substrate 1's layer's (but for 0.1 mg) follows
-    the substrate, at RMS 0.1 mg from it and 2 mg from its powder's; written with the layers' variants."""
+    the substrate, at RMS 0.1 mg from it and 2 mg from its powder's; an unknown variant is refused."""
     from benchmarks import profile_swap
 
     def table(path, variant, profiles):
         rows = [{"seed": seed, "start_mm": x, "length_mm": 1.0, "mass_g": m * 1e-3}
                 for seed, profile in profiles.items() for x, m in enumerate(profile)]
-        pd.DataFrame(rows).to_csv(path.with_suffix(".csv"), index=False)
-        path.with_suffix(".md").write_text(f"Layers: 2 replicated runs (variant `{variant}`), 0 map runs.\n")
-        return path.with_suffix(".csv")
+        pd.DataFrame(rows).to_csv(path, index=False)
+        return f"{variant}={path}"
 
-    own = table(tmp_path / "default", "default", {0: [6.0] * 10, 1: [8.0] * 10})
-    swapped = table(tmp_path / "swap", "substrate+1", {0: [8.1] * 10})
-    assert profile_swap.main([str(own), str(swapped), "--out", str(tmp_path)]) == 0
+    own = table(tmp_path / "default.csv", "default", {0: [6.0] * 10, 1: [8.0] * 10})
+    swapped = table(tmp_path / "swap.csv", "substrate+1", {0: [8.1] * 10})
+    assert profile_swap.main([own, swapped, "--out", str(tmp_path)]) == 0
     text = (tmp_path / "profile_swap.md").read_text()
     assert "| powder 0 on substrate 1 (substrate+1) | flat bed 0-5 mm     |                        0.1 |" \
            "                     2.1 | same substrate |" in text
     with pytest.raises(SystemExit):  # the default's own layers alone: nothing swapped to judge
-        profile_swap.main([str(own), "--out", str(tmp_path)])
+        profile_swap.main([own, "--out", str(tmp_path)])
+    with pytest.raises(SystemExit):
+        profile_swap.main([own, swapped.replace("substrate+1", "substrate+2"), "--out", str(tmp_path)])
