@@ -143,6 +143,10 @@ VARIANTS = {
     # the reference with its heap dosed 4 mm further back (its slumped toe near x = 1.5 mm, not 5.5): is the
     # layer over the region the pile's steady layer or the end of the cut heap's thicker one?
     "E1e8+strip2.5+pile40+heap-8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.heap_start_mm": -8.0},
+    # the wider reference with the same longer run-in: is its layer's step at 6-7 mm the end of the cut heap's
+    # thicker layer (it moves 4 mm back, out of the region) or the width's own (it stays)?
+    "E1e8+strip5+pile40+heap-8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.strip_width_mm": 5.0,
+                                  **pile(40, 5.0), "LEVEL.heap_start_mm": -8.0},
     # the substrate of the next (previous) replicate under this replicate's heap and feed: run at seed 0
     # (1), a layer shaped along x like its own seed's follows the powder, like the other seed's the substrate
     "substrate+1": {"substrate.seed": 8},

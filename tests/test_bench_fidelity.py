@@ -264,6 +264,16 @@ def test_the_shifted_heap_is_the_reference_with_a_longer_run_in_and_nothing_else
     assert shifted.sampling_region == reference.sampling_region and shifted.travel_end == reference.travel_end
 
 
+def test_the_wider_shifted_heap_is_the_wider_reference_with_the_same_longer_run_in():
+    """E1e8+strip5+pile40+heap-8 is E1e8+strip5+pile40 with the heap 4 mm further back, as heap-8 is for
+    the 2.5 mm reference."""
+    wider, shifted = variant_scenes("E1e8+strip5+pile40", "E1e8+strip5+pile40+heap-8")
+    assert fields_that_differ(wider, shifted) == {"heap", "box", "substrate_x"}
+    assert shifted.heap[0] == pytest.approx(wider.heap[0] - 4e-3)
+    assert shifted.heap_particles == wider.heap_particles == 15170
+    assert shifted.sampling_region == wider.sampling_region and shifted.travel_end == wider.travel_end
+
+
 def test_the_substrate_swaps_put_one_replicates_powder_on_the_other_replicates_substrate():
     """substrate+1 at replicate 0 builds replicate 1's substrate, substrate-1 at replicate 1 replicate 0's;
     the scene (heap, feed, region) is the default's."""
