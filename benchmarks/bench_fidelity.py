@@ -392,8 +392,9 @@ def main(argv=None) -> int:
             f"{time.strftime('%Y-%m-%d')} by\n{command}.\n\n" if args.summarise else
             f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, "
             f"{args.jobs} scenes at once, in {time.perf_counter() - started:.0f} s, by\n{command}.\n\n")
+    packings = ", ".join(f"`{v}` {n}" for v, n in runs.groupby("variant", sort=False)["seed"].nunique().items())
     text = (f"# Run time against error ({args.level} level)\n\n" + when +
-            f"Points (U mm/s, omega rad/s): {points}; {args.seeds} seeds (heap packings) per variant.\n"
+            f"Points (U mm/s, omega rad/s): {points}; seeds (heap packings) per variant: {packings}.\n"
             f"Error: mean over the points of |variant - reference| / mean |reference|, each the mean "
             f"over its seeds; M_s per unit sampling area (a wider strip has a wider region).\n\n"
             f"Variants:\n{overrides}\n\n" + shown.to_markdown(index=False) + "\n")

@@ -110,6 +110,20 @@ def test_two_ladders_from_one_base_are_each_judged_in_their_own_finer_scenes_sd(
     assert not steps[0]["converged"].iloc[0] and steps[1]["converged"].iloc[0]  # 2 sds off, then 0.5
 
 
+def test_a_summary_states_each_variants_own_packings_not_the_seeds_flag(tmp_path):
+    """Tables joined from several studies hold different packings per variant: the summary says how many
+    each has, whatever ``--seeds`` was given."""
+    base = {"mass_g": 1.0, "throughput_mm2_s": 20.0, "roughness_um": 80.0, "porosity_pct": 40.0}
+    sds = {k: 0.02 * v for k, v in base.items()}
+    runs = pd.DataFrame(runs_of("default", base, sds) + runs_of("E2e7", base, sds)).assign(
+        cpu_s=1.0, wall_s=1.0, steps=10, particles=5)
+    runs = runs[(runs["variant"] == "default") | (runs["seed"] < 2)]  # E2e7 with 2 packings, default with 3
+    runs.to_csv(tmp_path / "joined.csv", index=False)
+    assert bench_fidelity.main(["--variants", "default,E2e7", "--reference", "E2e7", "--name", "joined",
+                                "--seeds", "5", "--summarise", "--out", str(tmp_path)]) == 0
+    assert "seeds (heap packings) per variant: `default` 3, `E2e7` 2." in (tmp_path / "joined.md").read_text()
+
+
 def test_the_reference_front_judges_and_costs_each_knob_once_per_run(tmp_path):
     """``reference_front.py`` on hand-made run tables: a run repeated in two tables counts once, a
     CSV's ``default`` is renamed, each knob's shift is in its finer scene's sd and its cost relative
