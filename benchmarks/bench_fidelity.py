@@ -232,6 +232,24 @@ def run_scene(task) -> list[dict]:
     return rows
 
 
+def packings_per_variant(runs):
+    """How many seeds (heap packings) each variant has, and at which points when that differs.
+
+    Tables joined from several studies hold different packings per variant and per point: the
+    summary says what each has, whatever ``--seeds`` was given.
+    """
+    said = []
+    for variant, rows in runs.groupby("variant", sort=False):
+        counts = rows.groupby(["U_mm_s", "omega_rad_s"], sort=False)["seed"].nunique()
+        if counts.nunique() == 1:
+            said.append(f"`{variant}` {counts.iloc[0]}")
+            continue
+        by_count = counts.groupby(counts, sort=False).groups
+        said.append(f"`{variant}` {counts.min()}-{counts.max()} (" + "; ".join(
+            f"{n} at " + ", ".join(f"{u:g}:{w:g}" for u, w in idx) for n, idx in by_count.items()) + ")")
+    return ", ".join(said)
+
+
 def summarise(runs: pd.DataFrame, reference: str) -> pd.DataFrame:
     """One row per variant: cost per run and relative error per metric against ``reference``.
 
@@ -392,7 +410,7 @@ def main(argv=None) -> int:
             f"{time.strftime('%Y-%m-%d')} by\n{command}.\n\n" if args.summarise else
             f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, "
             f"{args.jobs} scenes at once, in {time.perf_counter() - started:.0f} s, by\n{command}.\n\n")
-    packings = ", ".join(f"`{v}` {n}" for v, n in runs.groupby("variant", sort=False)["seed"].nunique().items())
+    packings = packings_per_variant(runs)
     text = (f"# Run time against error ({args.level} level)\n\n" + when +
             f"Points (U mm/s, omega rad/s): {points}; seeds (heap packings) per variant: {packings}.\n"
             f"Error: mean over the points of |variant - reference| / mean |reference|, each the mean "

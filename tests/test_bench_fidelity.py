@@ -124,6 +124,17 @@ def test_a_summary_states_each_variants_own_packings_not_the_seeds_flag(tmp_path
     assert "seeds (heap packings) per variant: `default` 3, `E2e7` 2." in (tmp_path / "joined.md").read_text()
 
 
+def test_a_summary_states_where_a_variants_packings_differ_between_points():
+    """A variant with an extra packing at one point says so, point by point."""
+    base = {"mass_g": 1.0, "throughput_mm2_s": 20.0, "roughness_um": 80.0, "porosity_pct": 40.0}
+    sds = {k: 0.02 * v for k, v in base.items()}
+    runs = pd.DataFrame(runs_of("default", base, sds) + runs_of("E2e7", base, sds))
+    extra = runs[runs["variant"] == "E2e7"].iloc[[0]].assign(seed=99)
+    other = runs[runs["variant"] == "E2e7"].iloc[[0]].assign(omega_rad_s=10.0, seed=0)
+    runs = pd.concat([runs, extra, other], ignore_index=True)
+    assert bench_fidelity.packings_per_variant(runs) == "`default` 3, `E2e7` 1-4 (4 at 70:-15; 3 at 70:0; 1 at 70:10)"
+
+
 def test_the_reference_front_judges_and_costs_each_knob_once_per_run(tmp_path):
     """``reference_front.py`` on hand-made run tables: a run repeated in two tables counts once, a
     CSV's ``default`` is renamed, each knob's shift is in its finer scene's sd and its cost relative
