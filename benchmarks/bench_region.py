@@ -78,10 +78,22 @@ def layers(replicates: Path | None, map_runs: Path | None, variant: str) -> list
     return found
 
 
+def fed_mass_pct(atoms: pd.DataFrame, region: tuple, heap_particles: int) -> float:
+    """Share (%) of the mass whose centres lie over ``region`` (x0, x1, y0, y1 [m]) that the feed
+    added: the particles whose id is above the settled heap's count (the feed numbers its particles
+    after the heap's, ``analysis.dem.simulate``)."""
+    x, y = atoms["x"].to_numpy(), atoms["y"].to_numpy()
+    over = (x >= region[0]) & (x < region[1]) & (y >= region[2]) & (y < region[3])
+    mass = atoms["radius"].to_numpy() ** 3 * over
+    fed = atoms["id"].to_numpy() > heap_particles
+    return float(100 * mass[fed].sum() / mass.sum()) if mass.sum() > 0 else np.nan
+
+
 def measure(task) -> list[dict]:
-    """One layer's four metrics over every region (M_s scaled to ``area_ref`` [m^2])."""
+    """One layer's four metrics over every region (M_s scaled to ``area_ref`` [m^2]) and the share of
+    its mass there that the feed added."""
     layer, regions, area_ref, density, n_lines, seed = task
-    frame = read_dump(layer["dump"])
+    frame = read_dump(layer["dump"], required=("id", "x", "y", "z", "radius"))
     rows = []
     for label, region in regions[layer["source"]]:
         try:
@@ -91,11 +103,12 @@ def measure(task) -> list[dict]:
         except ValueError:  # the region reaches past this layer's box (a shorter travel): not measured
             report = dict.fromkeys(METRICS, np.nan)
         area = (region[1] - region[0]) * (region[3] - region[2])
-        row = {k: v for k, v in layer.items() if k not in ("dump", "substrate")}
+        row = {k: v for k, v in layer.items() if k not in ("dump", "substrate", "heap_particles")}
         row.update({"region_mm": label, "start_mm": region[0] * 1e3, "end_mm": region[1] * 1e3,
                     "length_mm": (region[1] - region[0]) * 1e3,
                     **{k: report[k] for k in METRICS}})
         row["mass_g"] *= area_ref / area
+        row["fed_mass_pct"] = fed_mass_pct(frame.atoms, region, layer["heap_particles"])
         rows.append(row)
     return rows
 
@@ -166,7 +179,10 @@ def main(argv=None) -> int:
         regions[f"{a:g}-{b:g}"] = (a * 1e-3, b * 1e-3)
     regions = {source: [(label, (*x, *y)) for label, x in regions.items()]
                for source, y in (("replicates", kept_y), ("map", (y0, y1)))}
-    found = layers(args.replicates, args.map, args.variant)
+    heap = {"replicates": scene(variant_config(config, args.level, VARIANTS[args.variant]), args.level).heap_particles,
+            "map": s.heap_particles}
+    found = [{**layer, "heap_particles": heap[layer["source"]]}
+             for layer in layers(args.replicates, args.map, args.variant)]
     if not found:
         parser.error(f"no layers found under --replicates {args.replicates} (variant {args.variant!r}) "
                      f"or --map {args.map}")
@@ -195,7 +211,9 @@ def main(argv=None) -> int:
             "- `<m>_R_max`: sqrt(1 - sd^2 / var over the map's runs), the best R a surrogate can reach;\n"
             "- `<m>_map_shift_sd`: the largest mean shift of one omega's map runs (over its U's) from their "
             "values over the level's region, in that region's pooled seed sd; `<m>_rep_shift_sd`: the same "
-            "for one point's replicates (the same layers, paired).\n\n"
+            "for one point's replicates (the same layers, paired);\n"
+            "- the CSV's `fed_mass_pct`: per layer and region, the share of the mass over the region that the "
+            "feed added (ids above the settled heap's count).\n\n"
             + table.to_markdown(index=False, floatfmt=".2f") + "\n")
     (args.out / f"{args.name}.md").write_text(text)
     print(text)

@@ -38,7 +38,8 @@ def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_
     """A kept layer of ``E1e8+strip2.5+pile40`` at the smoke level (a 2.5 mm strip; the level's is 1 mm):
     a square lattice of 100 um spheres covers only y = 1.2-2.4 mm, so the level's 1 mm region would hold
     none of it. Over the variant's strip, M_s per the level's region area is 1.2 / 2.5 of the lattice's
-    areal mass (it covers that share of the strip), whatever the region's length."""
+    areal mass (it covers that share of the strip), whatever the region's length. Its spheres past
+    x = 6 mm carry ids above the variant's heap count: the feed's share of each region is theirs."""
     import trimesh
 
     from analysis.metrics.dump import write_dump
@@ -47,7 +48,8 @@ def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_
     layer = tmp_path / "kept" / "E1e8+strip2.5+pile40_s0_U70_w-15"
     layer.mkdir(parents=True)
     x, y = np.meshgrid(np.arange(0.05e-3, 10e-3, 2 * r), 1.2e-3 + r + 2 * r * np.arange(12))
-    atoms = pd.DataFrame({"id": np.arange(1, x.size + 1), "x": x.ravel(), "y": y.ravel(), "z": r, "radius": r})
+    ids = np.arange(1, x.size + 1) + np.where(x.ravel() > 6e-3, 100_000, 0)  # fed past x = 6 mm (heap: 7,580)
+    atoms = pd.DataFrame({"id": ids, "x": x.ravel(), "y": y.ravel(), "z": r, "radius": r})
     write_dump(layer / "final.dump", atoms, [[-1e-3, 11e-3], [0.0, 2.5e-3], [-1e-3, 5e-3]])
     trimesh.Trimesh([[-0.01, -0.01, 0], [0.02, -0.01, 0], [0.02, 0.01, 0], [-0.01, 0.01, 0]],
                     [[0, 1, 2], [0, 2, 3]]).export(layer / "substrate.stl")
@@ -60,6 +62,9 @@ def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_
     for label in ("4.5-6.5", "4.5-7.5"):
         assert measured.loc[label, "mass_g"] * 1e-3 == pytest.approx(1.2 / 2.5 * areal * level_area, rel=1e-9)
     assert measured.loc["4.5-6.5", "roughness_um"] > 0  # bare bed beside the lattice: not a flat top
+    # the feed's share: lattice columns at 6.05-6.45 of 4.55-6.45 mm, and 6.05-7.45 of 4.55-7.45 mm
+    assert measured.loc["4.5-6.5", "fed_mass_pct"] == pytest.approx(25.0)
+    assert measured.loc["4.5-7.5", "fed_mass_pct"] == pytest.approx(50.0)
     with pytest.raises(SystemExit):
         bench_region.main(["--replicates", str(tmp_path / "kept"), "--variant", "strip9"])
 
