@@ -216,10 +216,12 @@ def run_scene(task) -> list[dict]:
                              "cpu_s": children_cpu() - cpu0, "error": short_error(err)})
                 continue
             cpu = children_cpu() - cpu0
-            if keep is not None:  # the layer and its substrate, to re-measure over other regions
+            if keep is not None:  # the layer and its substrate, to re-measure over other regions, and
+                # the run's input, log (the feed's weighings and fronts) and health, to read what it did
                 kept = keep / f"{name}_s{replicate}_U{U:g}_w{omega:g}"
                 kept.mkdir(parents=True, exist_ok=True)
-                shutil.copy2(tmp / "run" / "final.dump", kept / "final.dump")
+                for file in ("final.dump", "spread.in", "spread.log", "health.json"):
+                    shutil.copy2(tmp / "run" / file, kept / file)
                 shutil.copy2(tmp / "meshes" / "substrate.stl", kept / "substrate.stl")
             rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
                          "wall_s": health["wall_s"], "cpu_s": cpu, "steps": health["steps"],
@@ -363,8 +365,9 @@ def main(argv=None) -> int:
                              "the finer one's pooled seed sd (convergence); several ladders separated by ';'")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured", help="folder of the results")
     parser.add_argument("--keep", type=Path, default=None,
-                        help="copy each run's final.dump and substrate.stl to DIR/<variant>_s<seed>_U<U>_w<omega>/ "
-                             "(benchmarks/bench_region.py re-measures them over other sampling regions)")
+                        help="copy each run's final.dump, substrate.stl, spread.in, spread.log and health.json to "
+                             "DIR/<variant>_s<seed>_U<U>_w<omega>/ (benchmarks/bench_region.py re-measures the "
+                             "layers over other sampling regions)")
     parser.add_argument("--summarise", action="store_true",
                         help="no runs: rewrite <name>.md and .png from <name>.csv (same --variants, --reference)")
     args = parser.parse_args(argv)

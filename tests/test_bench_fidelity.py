@@ -82,7 +82,9 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
     table = (tmp_path / "smoke.md").read_text()
     assert "| default " in table and "0.0%" in table  # the reference against itself
 
-    assert (kept / "default_s0_U100_w0" / "final.dump").exists()
+    run = kept / "default_s0_U100_w0"
+    assert (run / "final.dump").exists() and (run / "health.json").exists()
+    assert "spreadmap feed_pile_kg_" in (run / "spread.log").read_text()  # the feed's weighings, kept
     assert bench_region.main(["--replicates", str(kept), "--level", "smoke", "--regions", "3.5-6.5", "--jobs", "1",
                               "--name", "region", "--out", str(tmp_path)]) == 0
     measured = pd.read_csv(tmp_path / "region.csv").set_index("region_mm")
@@ -92,6 +94,7 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
         assert measured.loc["4.5-6.5", k] == pytest.approx(row[k], rel=1e-9)
     assert 0 < measured.loc["3.5-6.5", "mass_g"] < 1.4 * row["mass_g"]  # per the level's area, not 1.5x its mass
     assert "| 3.5-6.5 " in (tmp_path / "region.md").read_text()
+    assert (measured["fed_mass_pct"].between(0, 100)).all()
 
 
 def test_two_ladders_from_one_base_are_each_judged_in_their_own_finer_scenes_sd(tmp_path):
