@@ -50,6 +50,7 @@ sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkou
 
 from analysis.config.fidelity import scene  # noqa: E402
 from analysis.config.load import load_config  # noqa: E402
+from analysis.dem.health import fed_share  # noqa: E402
 from analysis.metrics.dump import read_dump  # noqa: E402
 from analysis.metrics.noise_floor import POOLED, noise_floor  # noqa: E402
 from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units  # noqa: E402
@@ -78,20 +79,9 @@ def layers(replicates: Path | None, map_runs: Path | None, variant: str) -> list
     return found
 
 
-def fed_mass_pct(atoms: pd.DataFrame, region: tuple, heap_particles: int) -> float:
-    """Share (%) of the mass whose centres lie over ``region`` (x0, x1, y0, y1 [m]) that the feed
-    added: the particles whose id is above the settled heap's count (the feed numbers its particles
-    after the heap's, ``analysis.dem.simulate``)."""
-    x, y = atoms["x"].to_numpy(), atoms["y"].to_numpy()
-    over = (x >= region[0]) & (x < region[1]) & (y >= region[2]) & (y < region[3])
-    mass = atoms["radius"].to_numpy() ** 3 * over
-    fed = atoms["id"].to_numpy() > heap_particles
-    return float(100 * mass[fed].sum() / mass.sum()) if mass.sum() > 0 else np.nan
-
-
 def measure(task) -> list[dict]:
     """One layer's four metrics over every region (M_s scaled to ``area_ref`` [m^2]) and the share of
-    its mass there that the feed added."""
+    its particles there that the feed added (ids above the settled heap's count)."""
     layer, regions, area_ref, density, n_lines, seed = task
     frame = read_dump(layer["dump"], required=("id", "x", "y", "z", "radius"))
     rows = []
@@ -108,7 +98,7 @@ def measure(task) -> list[dict]:
                     "length_mm": (region[1] - region[0]) * 1e3,
                     **{k: report[k] for k in METRICS}})
         row["mass_g"] *= area_ref / area
-        row["fed_mass_pct"] = fed_mass_pct(frame.atoms, region, layer["heap_particles"])
+        row["fed_pct"] = 100 * fed_share(frame.atoms, layer["heap_particles"] + 1, region)
         rows.append(row)
     return rows
 
@@ -212,7 +202,7 @@ def main(argv=None) -> int:
             "- `<m>_map_shift_sd`: the largest mean shift of one omega's map runs (over its U's) from their "
             "values over the level's region, in that region's pooled seed sd; `<m>_rep_shift_sd`: the same "
             "for one point's replicates (the same layers, paired);\n"
-            "- the CSV's `fed_mass_pct`: per layer and region, the share of the mass over the region that the "
+            "- the CSV's `fed_pct`: per layer and region, the share of the particles over the region that the "
             "feed added (ids above the settled heap's count).\n\n"
             + table.to_markdown(index=False, floatfmt=".2f") + "\n")
     (args.out / f"{args.name}.md").write_text(text)

@@ -94,7 +94,7 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
         assert measured.loc["4.5-6.5", k] == pytest.approx(row[k], rel=1e-9)
     assert 0 < measured.loc["3.5-6.5", "mass_g"] < 1.4 * row["mass_g"]  # per the level's area, not 1.5x its mass
     assert "| 3.5-6.5 " in (tmp_path / "region.md").read_text()
-    assert (measured["fed_mass_pct"].between(0, 100)).all()
+    assert (measured["fed_pct"].between(0, 100)).all()
 
 
 def test_two_ladders_from_one_base_are_each_judged_in_their_own_finer_scenes_sd(tmp_path):

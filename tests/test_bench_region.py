@@ -63,8 +63,8 @@ def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_
         assert measured.loc[label, "mass_g"] * 1e-3 == pytest.approx(1.2 / 2.5 * areal * level_area, rel=1e-9)
     assert measured.loc["4.5-6.5", "roughness_um"] > 0  # bare bed beside the lattice: not a flat top
     # the feed's share: lattice columns at 6.05-6.45 of 4.55-6.45 mm, and 6.05-7.45 of 4.55-7.45 mm
-    assert measured.loc["4.5-6.5", "fed_mass_pct"] == pytest.approx(25.0)
-    assert measured.loc["4.5-7.5", "fed_mass_pct"] == pytest.approx(50.0)
+    assert measured.loc["4.5-6.5", "fed_pct"] == pytest.approx(25.0)
+    assert measured.loc["4.5-7.5", "fed_pct"] == pytest.approx(50.0)
     with pytest.raises(SystemExit):
         bench_region.main(["--replicates", str(tmp_path / "kept"), "--variant", "strip9"])
 

@@ -233,20 +233,33 @@ def feed_landings(folder: Path, printed: dict, roller_x, landed_at: dict) -> pd.
     return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=columns)
 
 
+def fed_in_region(atoms, first_fed_id: int, region: tuple) -> tuple:
+    """Masks of the particles whose centres lie over ``region`` (x0, x1, y0, y1 [m]) and of those
+    of them the feed added (ids from ``first_fed_id``: the feed numbers its particles after the
+    settled heap's)."""
+    x0, x1, y0, y1 = region
+    x, y = atoms["x"].to_numpy(), atoms["y"].to_numpy()
+    inside = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+    return inside, inside & (atoms["id"].to_numpy() >= first_fed_id)
+
+
+def fed_share(atoms, first_fed_id: int, region: tuple) -> float:
+    """Share of the particles over ``region`` (x0, x1, y0, y1 [m]) that the feed added; 0 if none."""
+    inside, fed = fed_in_region(atoms, first_fed_id, region)
+    return float(fed.sum() / max(inside.sum(), 1))
+
+
 def feed_health(landings: pd.DataFrame, atoms, first_fed_id: int, region: tuple) -> dict:
     """What the feed did to the measured layer: the farthest any fed particle landed ahead
     of the pile's front [mm], the share of the final layer in the sampling ``region``
     (x0, x1, y0, y1 [m]) that was fed (ids from ``first_fed_id``), and how far ahead of the
     roller those fed particles had landed (median and largest, mm)."""
-    x0, x1, y0, y1 = region
-    xyz = atoms[["x", "y"]].to_numpy()
-    inside = (xyz[:, 0] >= x0) & (xyz[:, 0] <= x1) & (xyz[:, 1] >= y0) & (xyz[:, 1] <= y1)
-    fed = inside & (atoms["id"].to_numpy() >= first_fed_id)
+    _, fed = fed_in_region(atoms, first_fed_id, region)
     in_layer = landings[landings["id"].isin(atoms["id"].to_numpy()[fed])]
     ahead = in_layer["ahead_of_roller_m"].to_numpy() * 1e3
     ahead_of_front = landings["ahead_of_front_m"].dropna()
     return {"fed_max_ahead_of_front_mm": float(ahead_of_front.max() * 1e3) if len(ahead_of_front) else 0.0,
-            "fed_share_of_region_layer": float(fed.sum() / max(inside.sum(), 1)),
+            "fed_share_of_region_layer": fed_share(atoms, first_fed_id, region),
             "fed_in_region_landed_ahead_of_roller_mm_median": float(np.median(ahead)) if len(ahead) else 0.0,
             "fed_in_region_landed_ahead_of_roller_mm_max": float(ahead.max()) if len(ahead) else 0.0}
 
