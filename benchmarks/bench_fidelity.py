@@ -5,6 +5,7 @@ Usage::
     .venv/bin/python benchmarks/bench_fidelity.py [--level default] [--points 100:-10,100:0,100:10]
         [--seeds 2] [--variants reference,default,E1e6,...] [--jobs 2] [--name fidelity]
         [--ladder default,E2e7,E5e7,E1e8[;E2e7,E2e7+pile40]] [--out benchmarks/measured] [--keep DIR]
+        [--movie-every-mm 0.5]
 
 Every variant is the config's fidelity level with a few keys overridden
 (``VARIANTS`` below). For each variant and seed (replicate: another heap
@@ -192,9 +193,17 @@ def sampling_area_mm2(config: dict, level: str) -> float:
     return (x1 - x0) * (y1 - y0) * 1e6
 
 
+def movie_steps(config: dict, level: str, U_mm_s: float, every_mm: float) -> int:
+    """Steps between movie frames for one every ``every_mm`` [mm] of the roller's travel at ``U_mm_s``
+    [mm/s]; 0 (no movie) for ``every_mm`` 0."""
+    if not every_mm:
+        return 0
+    return max(1, round(every_mm / U_mm_s / scene(config, level).timestep))
+
+
 def run_scene(task) -> list[dict]:
     """Geometry, settle (seed ``replicate``) and every point's spread of one variant."""
-    name, config, level, replicate, points, keep = task
+    name, config, level, replicate, points, keep, movie_every_mm = task
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -209,7 +218,7 @@ def run_scene(task) -> list[dict]:
             cpu0 = children_cpu()
             try:
                 health = spread(config, level, U, omega, tmp / "meshes", tmp / "settle", tmp / "run",
-                                replicate=replicate)
+                                movie_every=movie_steps(config, level, U, movie_every_mm), replicate=replicate)
             except (LiggghtsError, ValueError) as err:  # ValueError: e.g. an empty layer to measure
                 print(f"{name} seed {replicate} U={U:g} omega={omega:g}: failed: {err}", flush=True)
                 rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
@@ -223,6 +232,10 @@ def run_scene(task) -> list[dict]:
                 for file in ("final.dump", "spread.in", "spread.log", "health.json"):
                     shutil.copy2(tmp / "run" / file, kept / file)
                 shutil.copy2(tmp / "meshes" / "substrate.stl", kept / "substrate.stl")
+                if (tmp / "run" / "feed_landings.csv").exists():  # where each fed particle landed
+                    shutil.copy2(tmp / "run" / "feed_landings.csv", kept / "feed_landings.csv")
+                if movie_every_mm:  # the travel's frames
+                    shutil.copy2(tmp / "run" / "movie.dump", kept / "movie.dump")
             rows.append({"variant": name, "seed": replicate, "U_mm_s": U, "omega_rad_s": omega,
                          "wall_s": health["wall_s"], "cpu_s": cpu, "steps": health["steps"],
                          "particles": health["atoms"], "timestep_s": health["timestep_s"],
@@ -365,9 +378,13 @@ def main(argv=None) -> int:
                              "the finer one's pooled seed sd (convergence); several ladders separated by ';'")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured", help="folder of the results")
     parser.add_argument("--keep", type=Path, default=None,
-                        help="copy each run's final.dump, substrate.stl, spread.in, spread.log and health.json to "
+                        help="copy each run's final.dump, substrate.stl, spread.in, spread.log, health.json and "
+                             "feed_landings.csv to "
                              "DIR/<variant>_s<seed>_U<U>_w<omega>/ (benchmarks/bench_region.py re-measures the "
                              "layers over other sampling regions)")
+    parser.add_argument("--movie-every-mm", type=float, default=0.0,
+                        help="with --keep: also keep a frame of every particle every this many mm of the roller's "
+                             "travel (movie.dump)")
     parser.add_argument("--summarise", action="store_true",
                         help="no runs: rewrite <name>.md and .png from <name>.csv (same --variants, --reference)")
     args = parser.parse_args(argv)
@@ -378,7 +395,10 @@ def main(argv=None) -> int:
     if unknown or args.reference not in names:
         parser.error(f"unknown variant(s) {unknown} or reference {args.reference!r} not among --variants; "
                      f"known: {sorted(VARIANTS)}")
-    tasks = [(n, variant_config(base, args.level, VARIANTS[n]), args.level, seed, points, args.keep)
+    if args.movie_every_mm < 0 or (args.movie_every_mm and args.keep is None):
+        parser.error(f"--movie-every-mm {args.movie_every_mm:g}: a positive travel [mm] between frames, with --keep")
+    tasks = [(n, variant_config(base, args.level, VARIANTS[n]), args.level, seed, points, args.keep,
+              args.movie_every_mm)
              for n in names for seed in range(args.first_seed, args.first_seed + args.seeds)]
     started = time.perf_counter()
     out = args.out

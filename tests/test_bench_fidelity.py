@@ -1,6 +1,8 @@
 """benchmarks/bench_fidelity.py: the convergence judgement on hand-made runs, and a smoke run of
 the benchmark itself through real LIGGGHTS (the study: benchmarks/measured/stiffness.md), whose kept
 layer is bench_region.py's smoke run."""
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -72,7 +74,7 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
     kept = tmp_path / "kept"
     assert bench_fidelity.main(["--level", "smoke", "--points", "100:0", "--seeds", "1", "--jobs", "1",
                                 "--variants", "default", "--reference", "default", "--name", "smoke",
-                                "--out", str(tmp_path), "--keep", str(kept)]) == 0
+                                "--out", str(tmp_path), "--keep", str(kept), "--movie-every-mm", "2"]) == 0
     runs = pd.read_csv(tmp_path / "smoke.csv")
     assert len(runs) == 1 and ("error" not in runs or runs["error"].isna().all())
     row = runs.iloc[0]
@@ -85,6 +87,11 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
     run = kept / "default_s0_U100_w0"
     assert (run / "final.dump").exists() and (run / "health.json").exists()
     assert "spreadmap feed_pile_kg_" in (run / "spread.log").read_text()  # the feed's weighings, kept
+    frames = (run / "movie.dump").read_text().count("ITEM: TIMESTEP")  # a frame every 2 mm of the travel
+    travel_mm = (row["steps"] * row["timestep_s"]) * 100.0  # at most: the steps include the rest phase
+    assert 2 <= frames <= travel_mm / 2 + 2
+    landed = pd.read_csv(run / "feed_landings.csv")  # where each fed particle landed: every one
+    assert 0 < len(landed) == json.loads((run / "health.json").read_text())["fed_particles"]
     assert bench_region.main(["--replicates", str(kept), "--level", "smoke", "--regions", "3.5-6.5", "--jobs", "1",
                               "--name", "region", "--out", str(tmp_path)]) == 0
     measured = pd.read_csv(tmp_path / "region.csv").set_index("region_mm")
