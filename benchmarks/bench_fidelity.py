@@ -150,6 +150,10 @@ VARIANTS = {
                                   **pile(40, 5.0), "LEVEL.heap_start_mm": -8.0},
     # the substrate of the next (previous) replicate under this replicate's heap and feed: run at seed 0
     # (1), a layer shaped along x like its own seed's follows the powder, like the other seed's the substrate
+    # the roller stopped 8 mm past the region's end, not 4: the layer at x grows behind the roller until it
+    # is about 5 mm past (movie frames of the default at U 70, omega -15): is the region's layer complete?
+    "runout8": {"LEVEL.run_out_mm": 8.0},
+    "E1e8+strip2.5+pile40+runout8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.run_out_mm": 8.0},
     "substrate+1": {"substrate.seed": 8},
     "substrate-1": {"substrate.seed": 6},
 }

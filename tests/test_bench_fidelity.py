@@ -7,7 +7,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks import bench_fidelity, bench_region, bench_stress, compare_maps, reference_front
+from analysis.config.load import load_config
+from analysis.metrics.dump import read_dump
+from benchmarks import bench_fidelity, bench_region, bench_stress, compare_maps, layer_formation, reference_front
 from benchmarks.bench_fidelity import METRICS, convergence
 
 
@@ -102,6 +104,31 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
     assert 0 < measured.loc["3.5-6.5", "mass_g"] < 1.4 * row["mass_g"]  # per the level's area, not 1.5x its mass
     assert "| 3.5-6.5 " in (tmp_path / "region.md").read_text()
     assert (measured["fed_pct"].between(0, 100)).all()
+
+    # the kept movie: how far behind the roller the layer is laid, bin by bin
+    assert layer_formation.main(["--runs", str(kept), "--level", "smoke", "--name", "formation",
+                                 "--out", str(tmp_path)]) == 0
+    bins = pd.read_csv(tmp_path / "formation.csv")
+    rest = read_dump(run / "final.dump").atoms
+    inside = rest["x"].between(bins["bin_start_mm"].min() * 1e-3, bins["bin_end_mm"].max() * 1e-3, inclusive="left")
+    density = load_config(bench_fidelity.ROOT / "config.yaml")["material"]["density_kg_m3"]
+    width_mm = read_dump(run / "final.dump").box[1, 1] * 1e3
+    assert (bins["layer_mg_per_mm2"] * width_mm).sum() == pytest.approx(  # every particle at rest counted once
+        (density * 4 / 3 * np.pi * rest.loc[inside, "radius"] ** 3).sum() * 1e6)
+    region = bins[bins["bin_start_mm"].between(4.0, 6.0)]  # the smoke level's 4.5-6.5 mm, a frame every 2 mm
+    assert region["complete_before_stop"].all() and (region["x_roller_complete_mm"] < region["stop_mm"]).all()
+    assert (region["formation_length_mm"] > -2.0 - 1.0).all()  # not laid before the axis arrives (frame, bin)
+    unlaid = bins[~bins["complete_before_stop"] & (bins["layer_mg_per_mm2"] > 0)]  # a lower bound: to the stop
+    assert np.allclose(unlaid["formation_length_mm"], unlaid["stop_mm"] - unlaid["bin_end_mm"])
+
+
+def test_a_bin_is_complete_from_the_first_frame_after_which_it_stays_complete():
+    """Frames x bins: a bin that leaves 95-105 % of its mass at rest after first reaching it (a pile
+    passing over it, or a dip) is complete only once it stays there."""
+    masses = np.array([[0.0, 3.0, 1.0], [0.96, 1.0, 1.0], [0.9, 0.97, 1.0], [1.0, 1.04, 1.0]])
+    at_rest = np.ones(3)
+    assert layer_formation.completion_frame(masses, at_rest).tolist() == [3, 1, 0]
+    assert layer_formation.completion_frame(masses[:, :1] * 0.5, at_rest[:1]).tolist() == [4]  # never: all frames
 
 
 def test_two_ladders_from_one_base_are_each_judged_in_their_own_finer_scenes_sd(tmp_path):

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.metrics.dump import DumpError, Frame, read_dump, write_dump
+from analysis.metrics.dump import DumpError, Frame, read_dump, read_frames, write_dump
 
 BOX = np.array([[-1e-3, 2e-3], [0.0, 3e-3], [0.0, 1e-3]])
 
@@ -85,6 +85,21 @@ def test_last_frame_by_default_or_chosen_timestep(tmp_path, name):
     pd.testing.assert_frame_equal(read_dump(path, timestep=100).atoms, tables[100])
     with pytest.raises(DumpError, match=r"no frame with timestep 150.*3 frames"):
         read_dump(path, timestep=150)
+
+
+@pytest.mark.parametrize("name", ["m.dump", "m.dump.gz"])
+def test_every_frame_in_order_in_one_pass(tmp_path, name):
+    path = tmp_path / name
+    tables = {step: atoms_table(n=10 + step // 100, seed=step) for step in (0, 100, 200)}
+    for step, atoms in tables.items():
+        write_dump(path, atoms, BOX, timestep=step, append=step > 0)
+    frames = list(read_frames(path))
+    assert [f.timestep for f in frames] == [0, 100, 200]
+    for frame in frames:
+        pd.testing.assert_frame_equal(frame.atoms, tables[frame.timestep])
+    (tmp_path / "text").write_text("no frames here")
+    with pytest.raises(DumpError, match="no 'ITEM: TIMESTEP' frame"):
+        list(read_frames(tmp_path / "text"))
 
 
 def test_empty_frame(tmp_path):

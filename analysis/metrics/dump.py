@@ -117,6 +117,24 @@ def read_dump(path, timestep=None, required=REQUIRED_COLUMNS) -> Frame:
     return _parse_frame(block, path, required)
 
 
+def read_frames(path, required=REQUIRED_COLUMNS):
+    """Every frame of a dump file, in order, in one pass (a movie of a run).
+
+    Parameters and errors as :func:`read_dump`; yields :class:`Frame`.
+    """
+    path = Path(path)
+    data = _load_bytes(path)
+    try:
+        starts = [m.start() for m in _FRAME_START.finditer(data)] + [len(data)]
+        if len(starts) == 1:
+            raise DumpError(f"{path}: not a LAMMPS/LIGGGHTS dump file (no 'ITEM: TIMESTEP' frame found)")
+        for begin, end in zip(starts[:-1], starts[1:]):
+            yield _parse_frame(bytes(data[begin:end]), path, required)
+    finally:
+        if isinstance(data, mmap.mmap):
+            data.close()
+
+
 def write_dump(path, atoms, box, timestep=0, append=False, periodic=(False, True, False)) -> None:
     """Write one frame in LIGGGHTS ``dump custom`` format.
 

@@ -1,0 +1,178 @@
+"""How far behind the moving roller the layer is laid: the layer's mass along x, frame by frame.
+
+Usage::
+
+    .venv/bin/python benchmarks/layer_formation.py --runs DIR [--bin-mm 1] [--name layer_formation]
+        [--out benchmarks/measured]
+
+A forward-rolling roller drags powder backward under it: the layer at x keeps
+gaining mass after the roller's axis has passed x, until the roller is far
+enough ahead that its surface no longer reaches the layer. A sampling region
+closer than that to where the roller stops (``run_out_mm``) measures a layer
+still being laid. This benchmark measures that reach from runs kept by
+``bench_fidelity.py --keep DIR --movie-every-mm X`` (folders
+``<variant>_s<seed>_U<U>_w<omega>/`` holding ``movie.dump``, ``final.dump``
+and ``health.json``), with no new DEM.
+
+For each ``--bin-mm`` bin of x behind where the roller stopped, the bin's
+layer is *complete* from the first frame after which its mass stays within
+:data:`COMPLETE_TOLERANCE` of its mass at rest (``final.dump``); the
+*formation length* is the roller axis' x at that frame less the bin's far
+end: how far past a bin the roller travels before the layer there is laid. A
+bin completed only after the roller stopped (while the layer came to rest)
+was still being laid when the roller stopped: its formation length is the
+distance to the stop, a lower bound (``complete_before_stop`` false).
+
+Writes ``<name>.csv`` (one row per run and bin), ``<name>.md`` (per variant
+and bin: the layer's mass per area at rest and the formation length over the
+runs) and ``<name>.png`` (mass per area at rest along x, every run, each
+variant's sampling region shaded and stop marked).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkout's `analysis`) importable
+
+from analysis.config.fidelity import scene  # noqa: E402
+from analysis.config.load import load_config  # noqa: E402
+from analysis.metrics.dump import read_dump, read_frames  # noqa: E402
+from benchmarks.bench_fidelity import VARIANTS, variant_config  # noqa: E402
+
+KEPT = re.compile(r"(?P<variant>.+)_s(?P<seed>\d+)_U(?P<U>[-\d.]+)_w(?P<omega>[-\d.]+)$")
+
+#: A bin's layer is complete once its mass stays within this share of its mass at rest (above it
+#: while the pile ahead of the roller covers the bin, below it while the layer is still being laid).
+COMPLETE_TOLERANCE = 0.05
+
+
+def binned_mass(atoms: pd.DataFrame, edges: np.ndarray, density: float) -> np.ndarray:
+    """Mass [kg] of the particles whose centres fall in each bin of x between ``edges`` [m]."""
+    mass = density * 4.0 / 3.0 * np.pi * atoms["radius"].to_numpy() ** 3
+    return np.histogram(atoms["x"].to_numpy(), bins=edges, weights=mass)[0]
+
+
+def completion_frame(masses: np.ndarray, at_rest: np.ndarray, tolerance: float = COMPLETE_TOLERANCE) -> np.ndarray:
+    """Index of the first frame after which each bin's mass stays within ``tolerance`` of ``at_rest``.
+
+    ``masses`` is (frames, bins); a bin never complete gets the number of frames."""
+    ok = np.abs(masses - at_rest[None, :]) <= tolerance * at_rest[None, :]
+    stays = np.flip(np.logical_and.accumulate(np.flip(ok, axis=0), axis=0), axis=0)
+    return np.where(stays.any(axis=0), stays.argmax(axis=0), len(masses))
+
+
+def formation(run: Path, density: float, bin_width: float) -> pd.DataFrame:
+    """One row per bin [SI inside, mm and mg/mm^2 out] of a kept run with a movie."""
+    health = json.loads((run / "health.json").read_text())
+    dt, speed, x0 = health["timestep_s"], health["U_mm_s"] * 1e-3, health["roller_start_m"]
+    travel = health["roller_travel_m"]
+    stop = x0 + travel
+    rest = read_dump(run / "final.dump")
+    width = float(np.diff(rest.box[1])[0])
+    edges = np.arange(np.floor(x0 / bin_width) * bin_width, stop - bin_width / 2, bin_width)
+    frames = list(read_frames(run / "movie.dump"))
+    roller_x = x0 + np.minimum(np.array([f.timestep for f in frames]) * dt * speed, travel)
+    masses = np.array([binned_mass(f.atoms, edges, density) for f in frames])
+    at_rest = binned_mass(rest.atoms, edges, density)
+    done = completion_frame(masses, at_rest)
+    moving = roller_x < stop - 1e-9
+    before_stop = np.append(moving, False)[done]  # completed while the roller still moved
+    x_complete = np.where(at_rest > 0, np.append(roller_x, stop)[done], np.nan)  # an empty bin: no layer
+    return pd.DataFrame({
+        "bin_start_mm": edges[:-1] * 1e3, "bin_end_mm": edges[1:] * 1e3,
+        "layer_mg_per_mm2": at_rest / (bin_width * width),  # kg/m^2 = mg/mm^2
+        "x_roller_complete_mm": x_complete * 1e3,
+        "formation_length_mm": (x_complete - edges[1:]) * 1e3,
+        "complete_before_stop": before_stop & (at_rest > 0),
+        "stop_mm": stop * 1e3, "frames": len(frames)})
+
+
+def summarise(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per variant and bin: mean mass per area at rest and the formation length over the runs."""
+    grouped = rows.groupby(["variant", "bin_start_mm"], sort=True)
+    return grouped.agg(runs=("seed", "size"), layer_mg_per_mm2=("layer_mg_per_mm2", "mean"),
+                       layer_sd=("layer_mg_per_mm2", "std"),
+                       formation_median_mm=("formation_length_mm", "median"),
+                       formation_max_mm=("formation_length_mm", "max"),
+                       complete_before_stop=("complete_before_stop", "sum")).reset_index()
+
+
+def plot(rows: pd.DataFrame, regions: dict, path: Path) -> None:
+    """Mass per area at rest along x, every run; each variant's region shaded and stop marked."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    variants = sorted(rows["variant"].unique())
+    fig, axes = plt.subplots(len(variants), 1, figsize=(7, 2.6 * len(variants)), sharex=True, squeeze=False)
+    for ax, variant in zip(axes[:, 0], variants):
+        for (seed, U, omega), run in rows[rows["variant"] == variant].groupby(["seed", "U_mm_s", "omega_rad_s"]):
+            centre = (run["bin_start_mm"] + run["bin_end_mm"]) / 2
+            ax.plot(centre, run["layer_mg_per_mm2"], marker=".", label=f"s{seed} U{U:g} w{omega:g}")
+            ax.axvline(run["stop_mm"].iloc[0], color="k", lw=0.8)
+        ax.axvspan(*regions[variant], color="grey", alpha=0.2)
+        ax.set_title(f"{variant} (region shaded, roller stops at the line)", fontsize=9)
+        ax.set_ylabel("layer at rest [mg/mm$^2$]")
+        ax.legend(fontsize=6)
+    axes[-1, 0].set_xlabel("x [mm]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=Path, required=True, help="bench_fidelity.py --keep folder (with movies)")
+    parser.add_argument("--level", default="default")
+    parser.add_argument("--bin-mm", type=float, default=1.0)
+    parser.add_argument("--name", default="layer_formation")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
+    args = parser.parse_args(argv)
+    if not args.bin_mm > 0:
+        parser.error(f"--bin-mm {args.bin_mm}: a positive bin width [mm]")
+    runs = sorted(p for p in args.runs.glob("*") if KEPT.match(p.name) and (p / "movie.dump").exists())
+    if not runs:
+        parser.error(f"--runs {args.runs}: no kept run with a movie.dump (bench_fidelity.py --keep DIR "
+                     "--movie-every-mm X)")
+    base = load_config(ROOT / "config.yaml")
+    rows, regions = [], {}
+    for run in runs:
+        key = KEPT.match(run.name).groupdict()
+        if key["variant"] not in VARIANTS:
+            parser.error(f"{run}: unknown variant {key['variant']!r}")
+        s = scene(variant_config(base, args.level, VARIANTS[key["variant"]]), args.level)
+        regions[key["variant"]] = (s.sampling_region[0] * 1e3, s.sampling_region[1] * 1e3)
+        print(f"{run.name}: reading the movie", flush=True)
+        rows.append(formation(run, s.density, args.bin_mm * 1e-3).assign(
+            variant=key["variant"], seed=int(key["seed"]), U_mm_s=float(key["U"]), omega_rad_s=float(key["omega"])))
+    rows = pd.concat(rows, ignore_index=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows.to_csv(args.out / f"{args.name}.csv", index=False)
+    plot(rows, regions, args.out / f"{args.name}.png")
+    table = summarise(rows)
+    command = f"`.venv/bin/python benchmarks/layer_formation.py {' '.join(argv if argv is not None else sys.argv[1:])}`"
+    text = (f"# How far behind the roller the layer is laid ({args.level} level)\n\n"
+            f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()}, from {len(runs)} "
+            f"kept runs ({rows['frames'].min()}-{rows['frames'].max()} frames each), by\n{command}.\n\n"
+            f"Per {args.bin_mm:g} mm bin of x: the layer's mass per area at rest (mean and sd over the runs) and "
+            f"its formation length (the roller axis' x when the bin's mass stays within "
+            f"{COMPLETE_TOLERANCE:.0%} of that, less the bin's far end; median and largest over the runs); "
+            f"`complete_before_stop`: runs whose bin was laid before the roller stopped (else its formation "
+            f"length is a lower bound). Regions (mm): "
+            + ", ".join(f"`{v}` {a:g}-{b:g}" for v, (a, b) in sorted(regions.items())) + ".\n\n"
+            + table.to_markdown(index=False, floatfmt=".2f") + "\n")
+    (args.out / f"{args.name}.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
