@@ -153,6 +153,7 @@ VARIANTS = {
     # the roller stopped 8 mm past the region's end, not 4: the layer at x grows behind the roller until it
     # is about 5 mm past (movie frames of the default at U 70, omega -15): is the region's layer complete?
     "runout8": {"LEVEL.run_out_mm": 8.0},
+    "runout12": {"LEVEL.run_out_mm": 12.0},
     "E1e8+strip2.5+pile40+runout8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.run_out_mm": 8.0},
     "E1e8+strip5+pile40+runout8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.strip_width_mm": 5.0,
                                    **pile(40, 5.0), "LEVEL.run_out_mm": 8.0},
