@@ -79,7 +79,8 @@ def formation(run: Path, density: float, bin_width: float) -> pd.DataFrame:
     stop = x0 + travel
     rest = read_dump(run / "final.dump")
     width = float(np.diff(rest.box[1])[0])
-    edges = np.arange(np.floor(x0 / bin_width) * bin_width, stop - bin_width / 2, bin_width)
+    first, last = int(np.floor(x0 / bin_width)), int(np.floor(stop / bin_width))  # whole bins behind the stop
+    edges = np.arange(first, last + 1) * bin_width  # on multiples of the bin: every run's bins line up
     frames = list(read_frames(run / "movie.dump"))
     roller_x = x0 + np.minimum(np.array([f.timestep for f in frames]) * dt * speed, travel)
     masses = np.array([binned_mass(f.atoms, edges, density) for f in frames])
@@ -89,7 +90,7 @@ def formation(run: Path, density: float, bin_width: float) -> pd.DataFrame:
     before_stop = np.append(moving, False)[done]  # completed while the roller still moved
     x_complete = np.where(at_rest > 0, np.append(roller_x, stop)[done], np.nan)  # an empty bin: no layer
     return pd.DataFrame({
-        "bin_start_mm": edges[:-1] * 1e3, "bin_end_mm": edges[1:] * 1e3,
+        "bin_start_mm": np.round(edges[:-1] * 1e3, 6), "bin_end_mm": np.round(edges[1:] * 1e3, 6),
         "layer_mg_per_mm2": at_rest / (bin_width * width),  # kg/m^2 = mg/mm^2
         "x_roller_complete_mm": x_complete * 1e3,
         "formation_length_mm": (x_complete - edges[1:]) * 1e3,
