@@ -23,6 +23,14 @@ bin completed only after the roller stopped (while the layer came to rest)
 was still being laid when the roller stopped: its formation length is the
 distance to the stop, a lower bound (``complete_before_stop`` false).
 
+``--past-mm 2,4,6``: the four metrics over the level's sampling region
+measured on the frames where the roller's axis was that far past the
+region's end, against the same run's at rest (``<name>_past.csv``, and a
+table in ``<name>.md``): within one run, so free of the seed spread, what
+stopping the roller that far past the region would have missed of the layer
+the roller lays if it travels on (a roller stopped there also stops
+dragging, so this is the layer's state, not a stopped run's).
+
 Writes ``<name>.csv`` (one row per run and bin), ``<name>.md`` (per variant
 and bin: the layer's mass per area at rest and the formation length over the
 runs) and ``<name>.png`` (mass per area at rest along x, every run, each
@@ -47,7 +55,8 @@ sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkou
 from analysis.config.fidelity import scene  # noqa: E402
 from analysis.config.load import load_config  # noqa: E402
 from analysis.metrics.dump import read_dump, read_frames  # noqa: E402
-from benchmarks.bench_fidelity import VARIANTS, variant_config  # noqa: E402
+from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units  # noqa: E402
+from benchmarks.bench_fidelity import METRICS, VARIANTS, variant_config  # noqa: E402
 
 KEPT = re.compile(r"(?P<variant>.+)_s(?P<seed>\d+)_U(?P<U>[-\d.]+)_w(?P<omega>[-\d.]+)$")
 
@@ -98,6 +107,46 @@ def formation(run: Path, density: float, bin_width: float) -> pd.DataFrame:
         "stop_mm": stop * 1e3, "frames": len(frames)})
 
 
+def region_past(run: Path, s, past_mm: list[float], profilometer_seed: int) -> pd.DataFrame:
+    """The four metrics over ``s``'s sampling region on the frame nearest each ``past_mm`` [mm] of the
+    roller's axis past the region's end (``past_mm`` 0 rows: none there), and at rest (``past_mm`` NaN)."""
+    health = json.loads((run / "health.json").read_text())
+    dt, speed, x0 = health["timestep_s"], health["U_mm_s"] * 1e-3, health["roller_start_m"]
+    end = s.sampling_region[1]
+    wanted = {d: end + d * 1e-3 for d in past_mm if end + d * 1e-3 < x0 + health["roller_travel_m"]}
+    frames = {}
+    for frame in read_frames(run / "movie.dump"):
+        x = x0 + frame.timestep * dt * speed
+        for d, at in wanted.items():
+            if d not in frames or abs(x - at) < abs(frames[d][0] - at):
+                frames[d] = (x, frame)
+    measured = [(d, x, frame) for d, (x, frame) in sorted(frames.items())]
+    measured.append((np.nan, np.nan, read_dump(run / "final.dump")))
+    rows = []
+    for d, x, frame in measured:
+        report = to_report_units(spread_layer_metrics(frame, s.sampling_region, speed, s.density,
+                                                      substrate=run / "substrate.stl", n_lines=s.profilometer_lines,
+                                                      seed=profilometer_seed))
+        rows.append({"past_mm": d, "x_roller_mm": x * 1e3, **{k: report[k] for k in METRICS}})
+    return pd.DataFrame(rows)
+
+
+def past_table(past: pd.DataFrame) -> pd.DataFrame:
+    """Per variant and distance past the region: each metric's mean change from the same run at rest
+    (% of the mean at rest) and its range over the runs."""
+    rest = past[past["past_mm"].isna()].set_index(["variant", "seed", "U_mm_s", "omega_rad_s"])[list(METRICS)]
+    moving = past[past["past_mm"].notna()].set_index(["variant", "seed", "U_mm_s", "omega_rad_s"])
+    change = 100 * (moving[list(METRICS)] - rest.reindex(moving.index)) / rest.reindex(moving.index)
+    change["past_mm"] = moving["past_mm"]
+    out = []
+    for (variant, d), g in change.reset_index().groupby(["variant", "past_mm"]):
+        row = {"variant": variant, "roller past the region's end (mm)": d, "runs": len(g)}
+        for k, name in METRICS.items():
+            row[f"{name} change (%)"] = f"{g[k].mean():+.1f} ({g[k].min():+.1f} to {g[k].max():+.1f})"
+        out.append(row)
+    return pd.DataFrame(out)
+
+
 def summarise(rows: pd.DataFrame) -> pd.DataFrame:
     """Per variant and bin: mean mass per area at rest and the formation length over the runs."""
     grouped = rows.groupby(["variant", "bin_start_mm"], sort=True)
@@ -134,6 +183,9 @@ def main(argv=None) -> int:
     parser.add_argument("--runs", type=Path, required=True, help="bench_fidelity.py --keep folder (with movies)")
     parser.add_argument("--level", default="default")
     parser.add_argument("--bin-mm", type=float, default=1.0)
+    parser.add_argument("--past-mm", default="",
+                        help="comma-separated distances [mm] of the roller past the region's end at which to measure "
+                             "the region, against the same run at rest")
     parser.add_argument("--name", default="layer_formation")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     args = parser.parse_args(argv)
@@ -143,8 +195,12 @@ def main(argv=None) -> int:
     if not runs:
         parser.error(f"--runs {args.runs}: no kept run with a movie.dump (bench_fidelity.py --keep DIR "
                      "--movie-every-mm X)")
+    try:
+        past_mm = [float(v) for v in args.past_mm.split(",") if v.strip()]
+    except ValueError:
+        parser.error(f"--past-mm {args.past_mm!r}: comma-separated distances in mm")
     base = load_config(ROOT / "config.yaml")
-    rows, regions = [], {}
+    rows, regions, past = [], {}, []
     for run in runs:
         key = KEPT.match(run.name).groupdict()
         if key["variant"] not in VARIANTS:
@@ -152,8 +208,11 @@ def main(argv=None) -> int:
         s = scene(variant_config(base, args.level, VARIANTS[key["variant"]]), args.level)
         regions[key["variant"]] = (s.sampling_region[0] * 1e3, s.sampling_region[1] * 1e3)
         print(f"{run.name}: reading the movie", flush=True)
-        rows.append(formation(run, s.density, args.bin_mm * 1e-3).assign(
-            variant=key["variant"], seed=int(key["seed"]), U_mm_s=float(key["U"]), omega_rad_s=float(key["omega"])))
+        labels = dict(variant=key["variant"], seed=int(key["seed"]), U_mm_s=float(key["U"]),
+                      omega_rad_s=float(key["omega"]))
+        rows.append(formation(run, s.density, args.bin_mm * 1e-3).assign(**labels))
+        if past_mm:
+            past.append(region_past(run, s, past_mm, base["profilometer"]["seed"]).assign(**labels))
     rows = pd.concat(rows, ignore_index=True)
     args.out.mkdir(parents=True, exist_ok=True)
     rows.to_csv(args.out / f"{args.name}.csv", index=False)
@@ -170,6 +229,13 @@ def main(argv=None) -> int:
             f"length is a lower bound). Regions (mm): "
             + ", ".join(f"`{v}` {a:g}-{b:g}" for v, (a, b) in sorted(regions.items())) + ".\n\n"
             + table.to_markdown(index=False, floatfmt=".2f") + "\n")
+    if past:
+        past = pd.concat(past, ignore_index=True)
+        past.to_csv(args.out / f"{args.name}_past.csv", index=False)
+        text += ("\n## The region measured while the roller travels on\n\nEach metric over the region on the frame "
+                 "nearest each distance of the roller's axis past the region's end, against the same run at rest: "
+                 "mean change over the runs (% of the run at rest; smallest to largest).\n\n"
+                 + past_table(past).to_markdown(index=False, floatfmt=".1f") + "\n")
     (args.out / f"{args.name}.md").write_text(text)
     print(text)
     return 0

@@ -106,7 +106,7 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
     assert (measured["fed_pct"].between(0, 100)).all()
 
     # the kept movie: how far behind the roller the layer is laid, bin by bin
-    assert layer_formation.main(["--runs", str(kept), "--level", "smoke", "--name", "formation",
+    assert layer_formation.main(["--runs", str(kept), "--level", "smoke", "--name", "formation", "--past-mm", "0,2",
                                  "--out", str(tmp_path)]) == 0
     bins = pd.read_csv(tmp_path / "formation.csv")
     rest = read_dump(run / "final.dump").atoms
@@ -120,6 +120,12 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
     assert (region["formation_length_mm"] > -2.0 - 1.0).all()  # not laid before the axis arrives (frame, bin)
     unlaid = bins[~bins["complete_before_stop"] & (bins["layer_mg_per_mm2"] > 0)]  # a lower bound: to the stop
     assert np.allclose(unlaid["formation_length_mm"], unlaid["stop_mm"] - unlaid["bin_end_mm"])
+    past = pd.read_csv(tmp_path / "formation_past.csv")  # the region at rest: the benchmark's own numbers
+    at_rest = past[past["past_mm"].isna()].iloc[0]
+    for k in METRICS:
+        assert at_rest[k] == pytest.approx(row[k], rel=1e-9)
+    assert past["past_mm"].dropna().tolist() == [0.0, 2.0]  # the smoke roller stops 3 mm past the region
+    assert "| default " in (tmp_path / "formation.md").read_text().split("travels on")[1]
 
 
 def test_a_bin_is_complete_from_the_first_frame_after_which_it_stays_complete():
