@@ -116,7 +116,7 @@ def region_past(run: Path, s, past_mm: list[float], profilometer_seed: int) -> p
     wanted = {d: end + d * 1e-3 for d in past_mm if end + d * 1e-3 < x0 + health["roller_travel_m"]}
     frames = {}
     for frame in read_frames(run / "movie.dump"):
-        x = x0 + frame.timestep * dt * speed
+        x = x0 + min(frame.timestep * dt * speed, health["roller_travel_m"])  # at rest: where it stopped
         for d, at in wanted.items():
             if d not in frames or abs(x - at) < abs(frames[d][0] - at):
                 frames[d] = (x, frame)
