@@ -74,12 +74,18 @@ def test_gzip_detected_by_content_not_name(tmp_path):
     assert read_dump(path).timestep == 2500
 
 
-@pytest.mark.parametrize("name", ["m.dump", "m.dump.gz"])
-def test_last_frame_by_default_or_chosen_timestep(tmp_path, name):
-    path = tmp_path / name
+def three_frames(path):
+    """A dump of three frames (timesteps 0, 100, 200) of different atoms; their tables by timestep."""
     tables = {step: atoms_table(n=10 + step // 100, seed=step) for step in (0, 100, 200)}
     for step, atoms in tables.items():
         write_dump(path, atoms, BOX, timestep=step, append=step > 0)
+    return tables
+
+
+@pytest.mark.parametrize("name", ["m.dump", "m.dump.gz"])
+def test_last_frame_by_default_or_chosen_timestep(tmp_path, name):
+    path = tmp_path / name
+    tables = three_frames(path)
     assert read_dump(path).timestep == 200
     pd.testing.assert_frame_equal(read_dump(path).atoms, tables[200])
     pd.testing.assert_frame_equal(read_dump(path, timestep=100).atoms, tables[100])
@@ -90,9 +96,7 @@ def test_last_frame_by_default_or_chosen_timestep(tmp_path, name):
 @pytest.mark.parametrize("name", ["m.dump", "m.dump.gz"])
 def test_every_frame_in_order_in_one_pass(tmp_path, name):
     path = tmp_path / name
-    tables = {step: atoms_table(n=10 + step // 100, seed=step) for step in (0, 100, 200)}
-    for step, atoms in tables.items():
-        write_dump(path, atoms, BOX, timestep=step, append=step > 0)
+    tables = three_frames(path)
     frames = list(read_frames(path))
     assert [f.timestep for f in frames] == [0, 100, 200]
     for frame in frames:
