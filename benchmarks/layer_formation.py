@@ -132,15 +132,16 @@ def region_past(run: Path, s, past_mm: list[float], profilometer_seed: int) -> p
 
 
 def past_table(past: pd.DataFrame) -> pd.DataFrame:
-    """Per variant and distance past the region: each metric's mean change from the same run at rest
-    (% of the mean at rest) and its range over the runs."""
+    """Per variant, point and distance past the region: each metric's mean change from the same run at
+    rest (% of that run's) and its range over the runs."""
     rest = past[past["past_mm"].isna()].set_index(["variant", "seed", "U_mm_s", "omega_rad_s"])[list(METRICS)]
     moving = past[past["past_mm"].notna()].set_index(["variant", "seed", "U_mm_s", "omega_rad_s"])
     change = 100 * (moving[list(METRICS)] - rest.reindex(moving.index)) / rest.reindex(moving.index)
     change["past_mm"] = moving["past_mm"]
     out = []
-    for (variant, d), g in change.reset_index().groupby(["variant", "past_mm"]):
-        row = {"variant": variant, "roller past the region's end (mm)": d, "runs": len(g)}
+    for (variant, U, omega, d), g in change.reset_index().groupby(["variant", "U_mm_s", "omega_rad_s", "past_mm"]):
+        row = {"variant": variant, "U (mm/s)": U, "omega (rad/s)": omega, "roller past the region's end (mm)": d,
+               "runs": len(g)}
         for k, name in METRICS.items():
             row[f"{name} change (%)"] = f"{g[k].mean():+.1f} ({g[k].min():+.1f} to {g[k].max():+.1f})"
         out.append(row)
