@@ -148,15 +148,13 @@ VARIANTS = {
     # thicker layer (it moves 4 mm back, out of the region) or the width's own (it stays)?
     "E1e8+strip5+pile40+heap-8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.strip_width_mm": 5.0,
                                   **pile(40, 5.0), "LEVEL.heap_start_mm": -8.0},
-    # the substrate of the next (previous) replicate under this replicate's heap and feed: run at seed 0
-    # (1), a layer shaped along x like its own seed's follows the powder, like the other seed's the substrate
-    # the roller stopped 8 mm past the region's end, not 4: the layer at x grows behind the roller until it
-    # is about 5 mm past (movie frames of the default at U 70, omega -15): is the region's layer complete?
+    # the roller stopped 8 and 12 mm past the region's end, not 4: the layer at x grows behind a forward-rolling
+    # roller until it is about 4 mm past (benchmarks/layer_formation.py): is the region's layer complete?
     "runout8": {"LEVEL.run_out_mm": 8.0},
     "runout12": {"LEVEL.run_out_mm": 12.0},
     "E1e8+strip2.5+pile40+runout8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.run_out_mm": 8.0},
-    "E1e8+strip5+pile40+runout8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.strip_width_mm": 5.0,
-                                   **pile(40, 5.0), "LEVEL.run_out_mm": 8.0},
+    # the substrate of the next (previous) replicate under this replicate's heap and feed: run at seed 0
+    # (1), a layer shaped along x like its own seed's follows the powder, like the other seed's the substrate
     "substrate+1": {"substrate.seed": 8},
     "substrate-1": {"substrate.seed": 6},
 }
