@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     same_step["timestep.rayleigh_fraction"] = base["timestep"]["rayleigh_fraction"] * (
         same_step["LEVEL.youngs_modulus_dem_Pa"] / youngs_modulus(base, args.level)) ** 0.5
     # no second attempt at a smaller step (timestep.unstable_retry_fraction): what breaks is the finding
-    tasks = [(n, variant_config(base, args.level, {**NO_RETRY, **CASES[n][0]}), args.level, 0, CASES[n][1], None)
+    tasks = [(n, variant_config(base, args.level, {**NO_RETRY, **CASES[n][0]}), args.level, 0, CASES[n][1], None, 0.0)
              for n in names]
     started = time.perf_counter()
     with ProcessPoolExecutor(args.jobs) as pool:
