@@ -54,6 +54,7 @@ sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkou
 
 from analysis.config.fidelity import scene  # noqa: E402
 from analysis.config.load import load_config  # noqa: E402
+from analysis.metrics.deposit import deposit_profile  # noqa: E402
 from analysis.metrics.dump import read_dump, read_frames  # noqa: E402
 from analysis.metrics.spread_layer import spread_layer_metrics, to_report_units  # noqa: E402
 from benchmarks.bench_fidelity import METRICS, VARIANTS, variant_config  # noqa: E402
@@ -65,12 +66,6 @@ KEPT = re.compile(r"(?P<variant>.+)_s(?P<seed>\d+)_U(?P<U>[-\d.]+)_w(?P<omega>[-
 COMPLETE_TOLERANCE = 0.05
 
 
-def binned_mass(atoms: pd.DataFrame, edges: np.ndarray, density: float) -> np.ndarray:
-    """Mass [kg] of the particles whose centres fall in each bin of x between ``edges`` [m]."""
-    mass = density * 4.0 / 3.0 * np.pi * atoms["radius"].to_numpy() ** 3
-    return np.histogram(atoms["x"].to_numpy(), bins=edges, weights=mass)[0]
-
-
 def completion_frame(masses: np.ndarray, at_rest: np.ndarray, tolerance: float = COMPLETE_TOLERANCE) -> np.ndarray:
     """Index of the first frame after which each bin's mass stays within ``tolerance`` of ``at_rest``.
 
@@ -80,52 +75,51 @@ def completion_frame(masses: np.ndarray, at_rest: np.ndarray, tolerance: float =
     return np.where(stays.any(axis=0), stays.argmax(axis=0), len(masses))
 
 
-def formation(run: Path, density: float, bin_width: float) -> pd.DataFrame:
-    """One row per bin [SI inside, mm and mg/mm^2 out] of a kept run with a movie."""
+def read_movie(run: Path):
+    """A kept run's frames, the roller axis' x [m] at each (where it stopped, once it has), the x [m]
+    where it stopped, and its final state at rest."""
     health = json.loads((run / "health.json").read_text())
-    dt, speed, x0 = health["timestep_s"], health["U_mm_s"] * 1e-3, health["roller_start_m"]
-    travel = health["roller_travel_m"]
-    stop = x0 + travel
-    rest = read_dump(run / "final.dump")
-    width = float(np.diff(rest.box[1])[0])
-    first, last = int(np.floor(x0 / bin_width)), int(np.floor(stop / bin_width))  # whole bins behind the stop
-    edges = np.arange(first, last + 1) * bin_width  # on multiples of the bin: every run's bins line up
+    x0, travel = health["roller_start_m"], health["roller_travel_m"]
     frames = list(read_frames(run / "movie.dump"))
-    roller_x = x0 + np.minimum(np.array([f.timestep for f in frames]) * dt * speed, travel)
-    masses = np.array([binned_mass(f.atoms, edges, density) for f in frames])
-    at_rest = binned_mass(rest.atoms, edges, density)
-    done = completion_frame(masses, at_rest)
+    steps = np.array([f.timestep for f in frames])
+    roller_x = x0 + np.minimum(steps * health["timestep_s"] * health["U_mm_s"] * 1e-3, travel)
+    return frames, roller_x, x0 + travel, read_dump(run / "final.dump")
+
+
+def formation(frames, roller_x: np.ndarray, stop: float, rest, density: float, bin_width: float) -> pd.DataFrame:
+    """One row per bin [SI inside, mm and mg/mm^2 out] of a run's movie (:func:`read_movie`)."""
+    width = float(np.diff(rest.box[1])[0])
+    first, last = int(np.floor(roller_x[0] / bin_width)), int(np.floor(stop / bin_width))  # whole bins behind the stop
+    x_range = (first * bin_width, last * bin_width)  # on multiples of the bin: every run's bins line up
+    edges = np.arange(first, last + 1) * bin_width
+    areal = np.array([deposit_profile(f.atoms, density, width, x_range, bin_width)["areal_mass_mg_mm2"]
+                      for f in frames])
+    at_rest = deposit_profile(rest.atoms, density, width, x_range, bin_width)["areal_mass_mg_mm2"].to_numpy()
+    done = completion_frame(areal, at_rest)
     moving = roller_x < stop - 1e-9
     before_stop = np.append(moving, False)[done]  # completed while the roller still moved
     x_complete = np.where(at_rest > 0, np.append(roller_x, stop)[done], np.nan)  # an empty bin: no layer
     return pd.DataFrame({
         "bin_start_mm": np.round(edges[:-1] * 1e3, 6), "bin_end_mm": np.round(edges[1:] * 1e3, 6),
-        "layer_mg_per_mm2": at_rest / (bin_width * width),  # kg/m^2 = mg/mm^2
+        "layer_mg_per_mm2": at_rest,
         "x_roller_complete_mm": x_complete * 1e3,
         "formation_length_mm": (x_complete - edges[1:]) * 1e3,
         "complete_before_stop": before_stop & (at_rest > 0),
         "stop_mm": stop * 1e3, "frames": len(frames)})
 
 
-def region_past(run: Path, s, past_mm: list[float], profilometer_seed: int) -> pd.DataFrame:
+def region_past(frames, roller_x: np.ndarray, stop: float, rest, substrate: Path, U_mm_s: float, s,
+                past_mm: list[float], profilometer_seed: int) -> pd.DataFrame:
     """The four metrics over ``s``'s sampling region on the frame nearest each ``past_mm`` [mm] of the
-    roller's axis past the region's end (``past_mm`` 0 rows: none there), and at rest (``past_mm`` NaN)."""
-    health = json.loads((run / "health.json").read_text())
-    dt, speed, x0 = health["timestep_s"], health["U_mm_s"] * 1e-3, health["roller_start_m"]
+    roller's axis past the region's end (none past where it stopped), and at rest (``past_mm`` NaN)."""
     end = s.sampling_region[1]
-    wanted = {d: end + d * 1e-3 for d in past_mm if end + d * 1e-3 < x0 + health["roller_travel_m"]}
-    frames = {}
-    for frame in read_frames(run / "movie.dump"):
-        x = x0 + min(frame.timestep * dt * speed, health["roller_travel_m"])  # at rest: where it stopped
-        for d, at in wanted.items():
-            if d not in frames or abs(x - at) < abs(frames[d][0] - at):
-                frames[d] = (x, frame)
-    measured = [(d, x, frame) for d, (x, frame) in sorted(frames.items())]
-    measured.append((np.nan, np.nan, read_dump(run / "final.dump")))
+    measured = [(d, roller_x[k], frames[k]) for d in sorted(past_mm) if end + d * 1e-3 < stop
+                for k in [int(np.argmin(np.abs(roller_x - (end + d * 1e-3))))]]
+    measured.append((np.nan, np.nan, rest))
     rows = []
     for d, x, frame in measured:
-        report = to_report_units(spread_layer_metrics(frame, s.sampling_region, speed, s.density,
-                                                      substrate=run / "substrate.stl", n_lines=s.profilometer_lines,
+        report = to_report_units(spread_layer_metrics(frame, s.sampling_region, U_mm_s * 1e-3, s.density,
+                                                      substrate=substrate, n_lines=s.profilometer_lines,
                                                       seed=profilometer_seed))
         rows.append({"past_mm": d, "x_roller_mm": x * 1e3, **{k: report[k] for k in METRICS}})
     return pd.DataFrame(rows)
@@ -211,9 +205,11 @@ def main(argv=None) -> int:
         print(f"{run.name}: reading the movie", flush=True)
         labels = dict(variant=key["variant"], seed=int(key["seed"]), U_mm_s=float(key["U"]),
                       omega_rad_s=float(key["omega"]))
-        rows.append(formation(run, s.density, args.bin_mm * 1e-3).assign(**labels))
+        frames, roller_x, stop, rest = read_movie(run)
+        rows.append(formation(frames, roller_x, stop, rest, s.density, args.bin_mm * 1e-3).assign(**labels))
         if past_mm:
-            past.append(region_past(run, s, past_mm, base["profilometer"]["seed"]).assign(**labels))
+            past.append(region_past(frames, roller_x, stop, rest, run / "substrate.stl", labels["U_mm_s"], s,
+                                    past_mm, base["profilometer"]["seed"]).assign(**labels))
     rows = pd.concat(rows, ignore_index=True)
     args.out.mkdir(parents=True, exist_ok=True)
     rows.to_csv(args.out / f"{args.name}.csv", index=False)
