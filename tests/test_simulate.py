@@ -305,6 +305,40 @@ def test_killed_spread_resumes_from_its_newest_checkpoint(smoke, config):
     assert np.abs(v_res - v_full).max() < 1e-5
 
 
+def test_the_roller_stops_once_the_regions_layer_is_laid(smoke, config):
+    """layer_laid: from run_out_mm past the region on, the roller travels on until the region's particles
+    have been at rest at ``checks`` checks in a row, run_out_max_mm at the latest. Where it stopped follows
+    from the values LIGGGHTS printed at each check, and the run's health and final dump follow the roller
+    there. (Same box as the fixture's, so its settled heap serves; the smoke scene's soft particles jitter
+    at about 3 mm/s at rest, hence its at-rest speed.)"""
+    import copy
+    cfg = copy.deepcopy(config)
+    level = cfg["fidelity"]["smoke"]
+    level.update(run_out_mm=0.5, run_out_max_mm=level["run_out_mm"])
+    cfg["layer_laid"] = {"rms_speed_mm_s": 8.0, "checks": 2, "check_every_mm": 0.5}
+    s, root = scene(cfg, "smoke"), smoke["root"]
+    assert s.box == smoke["scene"].box
+    out = root / "laid"
+    health = spread(cfg, "smoke", U_MM_S, OMEGA, root / "meshes", root / "settle", out)
+    printed = read_log((out / "spread.log").read_text())["printed"]
+    checks = sorted((int(k.split("_")[-1]), v) for k, v in printed.items() if k.startswith("laid_check_"))
+    at_rest = [ke < 0.5 * s.mean_particle_mass * s.laid_speed**2 for _, ke in checks]
+    stop = int(printed["roller_stop_step"])
+    # it stopped at the first check ending a run of 2 at rest, and checked nothing after
+    first = next(i for i in range(1, len(checks)) if at_rest[i - 1] and at_rest[i])
+    assert stop == checks[first][0] and len(checks) == first + 1
+    assert not at_rest[0]  # the layer behind a forward-rolling roller still moved at the first check
+    speed, step_dx = U_MM_S * 1e-3, U_MM_S * 1e-3 * s.timestep
+    run_out = health["run_out_m"]
+    assert run_out == pytest.approx(health["roller_start_m"] + stop * step_dx - s.sampling_region[1], rel=1e-9)
+    assert s.travel_end - s.sampling_region[1] < run_out < s.travel_end_max - s.sampling_region[1]
+    assert health["layer_laid_at_stop"] and health["layer_laid_checks"] == first + 1
+    assert health["roller_travel_m"] == pytest.approx(stop * s.timestep * speed)
+    after = read_dump(out / "final.dump").atoms
+    assert after.x.max() < s.sampling_region[1] + run_out + 2 * max(s.diameters)  # removed ahead of the stop
+    assert health["lost"] == 0 and health["through_roller"] == 0
+
+
 def test_checkpoint_plan_spaces_checkpoints_and_skips_those_passed():
     assert checkpoint_plan(100, 0) == []
     assert checkpoint_plan(100, 3) == [(25, None), (50, 25), (75, 50)]
@@ -320,7 +354,12 @@ def test_travel_is_cut_at_checkpoints_and_feeds_and_resumes_after_them():
     # resumed at the checkpoint of step 50: the feed due there is still made, nothing earlier
     segs = travel_segments(100, [(75, 50)], [10, 30, 50], resume_step=50)
     assert [(g["start"], g["end"], g["feed"]) for g in segs] == [(50, 75, True), (75, 100, False)]
-    assert travel_segments(100, [], []) == [{"start": 0, "end": 100, "feed": False, "checkpoint": None}]
+    assert travel_segments(100, [], []) == [{"start": 0, "end": 100, "feed": False, "checkpoint": None,
+                                             "check": False}]
+    # stop checks past the fixed travel cut it too (those passed by a resumed run are not repeated)
+    segs = travel_segments(100, [(25, None)], [10], checks=[60, 80])
+    assert [(g["end"], g["check"]) for g in segs] == [(10, False), (25, False), (60, True), (80, True), (100, False)]
+    assert [g["end"] for g in travel_segments(100, [], [], resume_step=70, checks=[60, 80]) if g["check"]] == [80]
 
 
 def test_feed_starts_once_its_zone_covers_the_heap_and_repeats_every_feed_every_mm(config):

@@ -200,12 +200,13 @@ def check_speeds(config: dict) -> None:
         s = scene(resolve(config, values))
         points = [p for p in sweep_points(config) if all(p[k] == v for k, v in values.items())]
         slowest = min(points, key=lambda p: p["U_mm_s"])
-        steps = (s.travel_end - s.box[0]) / (slowest["U_mm_s"] * 1e-3) / s.timestep
+        steps = (s.travel_end_max - s.box[0]) / (slowest["U_mm_s"] * 1e-3) / s.timestep
         if steps > MAX_RUN_STEPS:
             refuse("sweep.U_mm_s", slowest["U_mm_s"], f"needs {steps:.3g} time steps of {s.timestep:.3g} s to travel "
-                  f"{(s.travel_end - s.box[0]) * 1e3:.3g} mm (from behind the heap, a roller.diameter_mm behind "
+                  f"{(s.travel_end_max - s.box[0]) * 1e3:.3g} mm (from behind the heap, a roller.diameter_mm behind "
                   f"fidelity.{s.level}.heap_start_mm, heap_length_mm and heap_particles, to the end of "
-                  f"fidelity.{s.level}.sampling_start_mm + sampling_length_mm + run_out_mm; the step is "
+                  f"fidelity.{s.level}.sampling_start_mm + sampling_length_mm + run_out_mm or run_out_max_mm; "
+                  f"the step is "
                   f"timestep.rayleigh_fraction of the Rayleigh time of the level's Young's modulus): "
                   f"at most {MAX_RUN_STEPS} fit a LIGGGHTS run")
         r_min = min(s.diameters) / 2

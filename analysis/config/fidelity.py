@@ -21,7 +21,11 @@ class Scene:
     heap: tuple            # (xlo, xhi, zlo, zhi) of the insertion block [m]
     heap_particles: int
     sampling_region: tuple  # (xmin, xmax, ymin, ymax) [m]
-    travel_end: float       # x of the roller axis when it stops [m]
+    travel_end: float       # x of the roller axis where it stops, or (with ``run_out_max_mm``) may first stop [m]
+    travel_end_max: float   # x of the roller axis where it stops at the latest [m] (= travel_end: a fixed stop)
+    laid_speed: float       # RMS speed [m/s] below which the sampling region's layer is laid (layer_laid)
+    laid_checks: int        # checks in a row at which it must be so before the roller may stop
+    laid_check_every: float  # roller travel [m] between two checks
     roller_radius: float
     roller_gap: float
     roller_facets: int
@@ -102,15 +106,23 @@ def scene(config: dict, level: str | None = None) -> Scene:
         feed_len = 0.0 if pile is None else feed_length(feed_pile_mass / width, mat["density_kg_m3"], radius, gap)
     except ValueError as err:
         refuse(f"fidelity.{level}.feed_pile_mg_per_mm", pile, str(err))
+    run_out = lvl["run_out_mm"] * mm
+    run_out_max = lvl.get("run_out_max_mm", lvl["run_out_mm"]) * mm
+    if run_out_max < run_out:
+        refuse(f"fidelity.{level}.run_out_max_mm", lvl["run_out_max_mm"],
+               f"the latest stop must be at least run_out_mm ({lvl['run_out_mm']:g} mm) past the region")
+    laid = config["layer_laid"]
     box = (heap_start - (2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
-           sample_x1 + lvl["run_out_mm"] * mm + max(radius, feed_len) + 2 * mm,
+           sample_x1 + run_out_max + max(radius, feed_len) + 2 * mm,
            0.0, width,
            -max(gap, 6 * sub["sq_um"] * um) - 0.2 * mm, gap + 2 * radius + 5 * mm)
     return Scene(
         level=level, strip_width=width,
         heap=(heap_start, heap_start + heap_length, gap, gap + heap_height), heap_particles=lvl["heap_particles"],
         sampling_region=(sample_x0, sample_x1, y0, y0 + sample_w),
-        travel_end=sample_x1 + lvl["run_out_mm"] * mm,
+        travel_end=sample_x1 + run_out, travel_end_max=sample_x1 + run_out_max,
+        laid_speed=laid["rms_speed_mm_s"] * mm, laid_checks=laid["checks"],
+        laid_check_every=laid["check_every_mm"] * mm,
         roller_radius=radius, roller_gap=gap, roller_facets=roller["facets_around"],
         diameters=tuple(diameters), mass_fractions=tuple(fractions),
         density=mat["density_kg_m3"], youngs_modulus=youngs,
@@ -127,7 +139,7 @@ def scene(config: dict, level: str | None = None) -> Scene:
         feed_pile_mass=feed_pile_mass, feed_length=feed_len, feed_every=lvl.get("feed_every_mm", FEED_EVERY_MM) * mm,
         substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
                    "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "mesh": sub["mesh"]},
-        rough_x=(sample_x0 - 0.5 * mm, sample_x1 + 0.5 * mm),
+        rough_x=(sample_x0 - lvl.get("rough_before_mm", 0.5) * mm, sample_x1 + lvl.get("rough_past_mm", 0.5) * mm),
         box=box,
         substrate_x=box[:2],
     )

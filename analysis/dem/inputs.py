@@ -141,15 +141,31 @@ def feed_zone(s: Scene, x_axis: float, floor: float, axis_z: float) -> dict:
             "axis_z": axis_z, "radius": clear}
 
 
-def travel_segments(travel_steps: int, checkpoints: list, feeds: list, resume_step: int = 0) -> list[dict]:
-    """The travel after ``resume_step`` cut at every checkpoint and feed step: a list of
-    ``{"end", "feed", "checkpoint"}`` in order; ``feed`` is true if the pile is topped up at
-    the segment's start, ``checkpoint`` the ``(step, previous)`` written at its end or None."""
+def stop_checks(s: Scene, x0: float, speed: float) -> tuple[int, list[int]]:
+    """Where a roller starting at ``x0`` [m] and moving at ``speed`` [m/s] stops: the steps of its
+    fixed travel (to ``s.travel_end``) and of the checks after it (every ``s.laid_check_every`` [m],
+    before ``s.travel_end_max``) at which it stops once the sampling region's layer is laid
+    (``layer_laid``). No checks when the level's stop is fixed."""
+    per_step = speed * s.timestep
+    fixed = ceil((s.travel_end - x0) / speed / s.timestep)
+    last = ceil((s.travel_end_max - x0) / speed / s.timestep)
+    every = max(1, round(s.laid_check_every / per_step))
+    return fixed, list(range(fixed, last, every)) if last > fixed else []
+
+
+def travel_segments(travel_steps: int, checkpoints: list, feeds: list, resume_step: int = 0,
+                    checks: list = ()) -> list[dict]:
+    """The travel after ``resume_step`` cut at every checkpoint, feed step and stop check: a list of
+    ``{"end", "feed", "checkpoint", "check"}`` in order; ``feed`` is true if the pile is topped up at
+    the segment's start, ``checkpoint`` the ``(step, previous)`` written at its end or None, ``check``
+    true if the roller may stop at its end (:func:`stop_checks`)."""
     at_end = {step: (step, previous) for step, previous in checkpoints}
     feeds = [f for f in feeds if f >= resume_step]
-    cuts = sorted(set(at_end) | {f for f in feeds if f > resume_step} | {travel_steps})
+    checks = {c for c in checks if c > resume_step}
+    cuts = sorted(set(at_end) | {f for f in feeds if f > resume_step} | checks | {travel_steps})
     segments, start = [], resume_step
     for end in cuts:
-        segments.append({"start": start, "end": end, "feed": start in feeds, "checkpoint": at_end.get(end)})
+        segments.append({"start": start, "end": end, "feed": start in feeds, "checkpoint": at_end.get(end),
+                         "check": end in checks})
         start = end
     return segments

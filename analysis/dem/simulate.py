@@ -58,6 +58,7 @@ from analysis.dem.inputs import (
     rest_loop,
     seeds,
     skin,
+    stop_checks,
     travel_segments,
 )
 from analysis.dem.liggghts import LiggghtsError, UnstableRunError, input_path, render, run
@@ -254,7 +255,9 @@ class SpreadPlan:
     omega_rad_s: float
     speed: float            # U [m/s]
     x0: float               # the roller axis' start [m]
-    travel_steps: int
+    travel_steps: int       # steps of the longest travel (to ``s.travel_end_max``)
+    fixed_steps: int        # steps of the travel before the roller may stop (to ``s.travel_end``)
+    checks: list            # steps after it at which it stops if the region's layer is laid (inputs.stop_checks)
     gap: dict               # :func:`geometry.roller_gap`: the axis height and the gap as built
     settled_particles: int  # particles of the settled heap
     first_fed_id: int       # the id of the first particle the feed adds
@@ -269,8 +272,8 @@ class SpreadPlan:
         ``restart`` (a checkpoint) when resumed."""
         s, feed = self.s, self.feed
         elapsed = step * s.timestep
-        segments = travel_segments(self.travel_steps, checkpoint_plan(self.travel_steps, s.checkpoints_per_run, step),
-                                   self.feeds, step)
+        segments = travel_segments(self.travel_steps, checkpoint_plan(self.fixed_steps, s.checkpoints_per_run, step),
+                                   self.feeds, step, self.checks)
         for seg in segments:
             if seg["feed"]:
                 seg["zone"] = feed_zone(s, self.x0 + self.speed * seg["start"] * s.timestep, feed["floor"],
@@ -314,8 +317,8 @@ def plan_spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, mes
     x0 = geometry.roller_start(atoms0, s, axis_z=gap["axis_z_m"])
     if x0 - s.roller_radius <= s.box[0]:
         raise LiggghtsError(f"roller start x = {x0:.4g} m puts the roller outside the box (x >= {s.box[0]:.4g} m)")
-    travel_time = (s.travel_end - x0) / speed
-    travel_steps = ceil(travel_time / s.timestep)
+    fixed_steps, checks = stop_checks(s, x0, speed)
+    travel_steps = ceil((s.travel_end_max - x0) / speed / s.timestep)
     if not 1 <= travel_steps <= MAX_RUN_STEPS:
         raise ConfigError(f"spreader speed U = {U_mm_s:g} mm/s: the travel takes {travel_steps:.3g} time steps of "
                           f"{s.timestep:.3g} s; a LIGGGHTS run takes 1 to {MAX_RUN_STEPS}")
@@ -326,7 +329,7 @@ def plan_spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, mes
         movie_every = max(1, round(BASELINE_DUMP_EVERY_S / s.timestep))
     motion = roller_motion(speed, omega_rad_s, s.roller_radius)
     heap_toe = float((atoms0["x"] + atoms0["radius"]).max())
-    feeds = feed_plan(s, x0, speed, travel_steps, heap_toe)
+    feeds = feed_plan(s, x0, speed, travel_steps, heap_toe)  # (those after where the roller stops are not run)
     feed, fall_height = None, 0.0
     first_fed_id = int(atoms0["id"].max()) + 1
     if feeds:
@@ -344,14 +347,17 @@ def plan_spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, mes
                    binsize=binsize(s), thermo_every=THERMO_EVERY, processors=processors_grid(s),
                    substrate_stl=input_path(meshes / "substrate.stl", out),
                    roller_stl=input_path(meshes / "roller_shell.stl", out),
-                   roller_z=gap["axis_z_m"], travel_steps=travel_steps,
+                   roller_z=gap["axis_z_m"], fixed_steps=fixed_steps, checks=checks,
+                   laid_ke=0.5 * s.mean_particle_mass * s.laid_speed**2,
+                   roller_x0=x0, step_dx=speed * s.timestep,
                    **rest_loop(s, s.rest_time, stop_at_rest="stop_at_rest" in skips),
-                   travel_end=s.travel_end, remove_ahead="remove_ahead" in skips,
+                   remove_ahead="remove_ahead" in skips,
                    movie_every=movie_every, movie="movie.dump",
                    squeeze_speed=squeeze_threshold(wall_speed, fall_height), squeeze={"factor": SQUEEZE_FACTOR},
                    dump="final.dump.part", checkpoint_dir=CHECKPOINT_DIR)
     return SpreadPlan(s=s, out=out, meshes=meshes, settled=settled, U_mm_s=U_mm_s, omega_rad_s=omega_rad_s,
-                      speed=speed, x0=x0, travel_steps=travel_steps, gap=gap, settled_particles=len(atoms0),
+                      speed=speed, x0=x0, travel_steps=travel_steps, fixed_steps=fixed_steps, checks=checks,
+                      gap=gap, settled_particles=len(atoms0),
                       first_fed_id=first_fed_id, feeds=feeds, feed=feed, wall_speed=wall_speed,
                       skips=frozenset(skips), context=context)
 
@@ -396,7 +402,8 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
         raise LiggghtsError(f"LIGGGHTS ended (exit 0, no ERROR line) without writing {out / 'final.dump.part'}; "
                             f"last screen lines:\n{tail}")
     atoms = read_dump(out / "final.dump.part").atoms
-    inside = through_roller(atoms, plan.step_x(plan.travel_steps), plan.context["roller_z"], s.roller_radius)
+    stop = int(log["printed"]["roller_stop_step"])  # where the roller stopped (layer_laid)
+    inside = through_roller(atoms, plan.step_x(stop), plan.context["roller_z"], s.roller_radius)
     if inside:
         raise UnstableRunError(f"unsound run: {inside} particles passed through the roller (centre inside it): "
                             "lower the time step or stiffen the particles")
@@ -407,17 +414,18 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
     fed = int(log["thermo"]["Atoms"].iloc[0]) - plan.settled_particles + int(log["inserted"])
     health.update(through_roller=inside, fed_particles=fed,
                   **layer_health(atoms, s, plan.meshes / "substrate.stl", plan.settled_particles + fed - removed,
-                                 roller=(plan.step_x(plan.travel_steps), plan.context["roller_z"], s.roller_radius)))
+                                 roller=(plan.step_x(stop), plan.context["roller_z"], s.roller_radius)))
     health.update(heap_supply(ahead, s.heap_particles), removed_ahead_of_roller=removed,
                   mass_ahead_of_roller_kg=float(log["printed"]["mass_ahead_of_roller_kg"]))
-    feeds = plan.feeds
+    feeds = [f for f in plan.feeds if f < stop]
     if feeds:
         landings = feed_landings(out / FEED_DIR, log["printed"], plan.step_x,
-                                 dict(zip(feeds, feeds[1:] + [plan.travel_steps])))
+                                 dict(zip(feeds, feeds[1:] + [stop])))
         landings.to_csv(out / "feed_landings.csv", index=False)
         health.update(feed_topups=len(feeds),
                       feed_pile_min_fraction=feed_pile_fraction(log["printed"], s.feed_pile_mass),
                       **feed_health(landings, atoms, plan.first_fed_id, s.sampling_region))
+    laid_checks = [k for k in log["printed"] if k.startswith("laid_check_")]
     thermo = log["thermo"]
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
     # particle-steps of every particle integrated during the run (the pile included), per CPU second
@@ -425,7 +433,9 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
     return {"U_mm_s": plan.U_mm_s, "omega_rad_s": plan.omega_rad_s, "wall_s": log["wall_s"], "cpu_s": log["cpu_s"],
             "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
             "mpi_launcher": log["launcher"], "processors": plan.context["processors"],
-            "roller_start_m": plan.x0, "roller_travel_m": plan.speed * plan.travel_steps * s.timestep,
+            "roller_start_m": plan.x0, "roller_travel_m": plan.speed * stop * s.timestep,
+            "run_out_m": plan.step_x(stop) - s.sampling_region[1], "layer_laid_checks": len(laid_checks),
+            "layer_laid_at_stop": bool(plan.checks) and stop < plan.travel_steps,
             "rayleigh_fraction": log["measured_max_rayleigh_fraction"],
             "hertz_fraction": log["measured_max_hertz_fraction"],
             "particle_steps": particle_steps, "particle_steps_per_s": particle_steps / max(log["cpu_s"], 1e-9),
