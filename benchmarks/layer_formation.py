@@ -125,6 +125,67 @@ def region_past(frames, roller_x: np.ndarray, stop: float, rest, substrate: Path
     return pd.DataFrame(rows)
 
 
+def region_speed(atoms: pd.DataFrame, region: tuple, density: float, mean_mass: float) -> float:
+    """The sampling region's particles' speed [m/s] as the stop rule (``layer_laid``) sees it: the RMS
+    speed of a mean-mass particle with their mean kinetic energy (over every particle whose centre's x
+    is in the region, at any height)."""
+    inside = atoms[(atoms["x"] >= region[0]) & (atoms["x"] < region[1])]
+    if inside.empty:
+        return 0.0
+    mass = density * 4.0 / 3.0 * np.pi * inside["radius"].to_numpy() ** 3
+    v2 = (inside[["vx", "vy", "vz"]].to_numpy() ** 2).sum(axis=1)
+    return float(np.sqrt(np.mean(mass * v2) / mean_mass))
+
+
+def rule_stop(speeds: np.ndarray, threshold: float, checks: int) -> int | None:
+    """Index of the first check ending ``checks`` in a row with ``speeds`` below ``threshold`` (None: never)."""
+    run = 0
+    for k, slow in enumerate(speeds < threshold):
+        run = run + 1 if slow else 0
+        if run >= checks:
+            return k
+    return None
+
+
+def stop_rules(frames, roller_x: np.ndarray, stop: float, rest, s, rules: list, min_mm: float, measure) -> pd.DataFrame:
+    """Where each ``(speed [mm/s], checks)`` rule, checked on the movie's frames from ``min_mm`` past the
+    region's end on, would have stopped the roller, and the four metrics there against the run at rest
+    (``measure(frame)``: the metrics of a frame). A rule never met stops where the run stopped."""
+    end = s.sampling_region[1]
+    first = end + min_mm * 1e-3 - 1e-9
+    k_checks = [k for k in range(len(frames)) if first <= roller_x[k] < stop - 1e-9]
+    speeds = np.array([region_speed(frames[k].atoms, s.sampling_region, s.density, s.mean_particle_mass)
+                       for k in k_checks]) * 1e3
+    measured = {None: measure(rest)}  # by check index (None: at rest), each frame measured once
+    at_rest, rows = measured[None], []
+    for speed, checks in rules:
+        i = rule_stop(speeds, speed, checks)
+        x = roller_x[k_checks[i]] if i is not None else stop
+        if i not in measured:
+            measured[i] = measure(frames[k_checks[i]])
+        rows.append({"rule_mm_s": speed, "rule_checks": checks, "laid_before_end": i is not None,
+                     "stop_past_mm": (x - end) * 1e3,
+                     **{f"{name}_change_pct": 100 * (measured[i][k] - at_rest[k]) / at_rest[k]
+                        for k, name in METRICS.items()}})
+    return pd.DataFrame(rows)
+
+
+def rules_table(rules: pd.DataFrame) -> pd.DataFrame:
+    """Per rule: where it stops (median and largest distance past the region), how many runs it stopped
+    before they ended, and each metric's mean and largest absolute change from the run at rest."""
+    out = []
+    for (speed, checks), g in rules.groupby(["rule_mm_s", "rule_checks"]):
+        row = {"at rest below (mm/s)": speed, "checks in a row": checks, "runs": len(g),
+               "stopped before the run's end": int(g["laid_before_end"].sum()),
+               "stop past the region (mm), median / max": f"{g['stop_past_mm'].median():.1f} / "
+                                                           f"{g['stop_past_mm'].max():.1f}"}
+        for name in METRICS.values():
+            change = g[f"{name}_change_pct"].abs()
+            row[f"|{name} change| (%), mean / max"] = f"{change.mean():.1f} / {change.max():.1f}"
+        out.append(row)
+    return pd.DataFrame(out)
+
+
 def past_table(past: pd.DataFrame) -> pd.DataFrame:
     """Per variant, point and distance past the region: each metric's mean change from the same run at
     rest (% of that run's) and its range over the runs."""
@@ -181,6 +242,11 @@ def main(argv=None) -> int:
     parser.add_argument("--past-mm", default="",
                         help="comma-separated distances [mm] of the roller past the region's end at which to measure "
                              "the region, against the same run at rest")
+    parser.add_argument("--stop-rules", default="",
+                        help="comma-separated SPEED:CHECKS stop rules (layer_laid: the region's RMS speed in mm/s "
+                             "below SPEED at CHECKS frames in a row) to try on the movies' frames")
+    parser.add_argument("--rules-from-mm", type=float, default=2.0,
+                        help="the rules' first check this far past the region's end [mm] (run_out_mm)")
     parser.add_argument("--name", default="layer_formation")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     args = parser.parse_args(argv)
@@ -194,8 +260,14 @@ def main(argv=None) -> int:
         past_mm = [float(v) for v in args.past_mm.split(",") if v.strip()]
     except ValueError:
         parser.error(f"--past-mm {args.past_mm!r}: comma-separated distances in mm")
+    try:
+        rules = [(float(a), int(b)) for a, b in (r.split(":") for r in args.stop_rules.split(",") if r.strip())]
+    except ValueError:
+        parser.error(f"--stop-rules {args.stop_rules!r}: comma-separated SPEED:CHECKS, e.g. 1:3,0.5:2")
+    if any(speed <= 0 or checks < 1 for speed, checks in rules):
+        parser.error(f"--stop-rules {args.stop_rules!r}: a positive speed and at least 1 check")
     base = load_config(ROOT / "config.yaml")
-    rows, regions, past = [], {}, []
+    rows, regions, past, tried = [], {}, [], []
     for run in runs:
         key = KEPT.match(run.name).groupdict()
         if key["variant"] not in VARIANTS:
@@ -210,6 +282,14 @@ def main(argv=None) -> int:
         if past_mm:
             past.append(region_past(frames, roller_x, stop, rest, run / "substrate.stl", labels["U_mm_s"], s,
                                     past_mm, base["profilometer"]["seed"]).assign(**labels))
+        if rules:
+            def measure(frame, run=run, U=labels["U_mm_s"], s=s):
+                return to_report_units(spread_layer_metrics(frame, s.sampling_region, U * 1e-3, s.density,
+                                                            substrate=run / "substrate.stl",
+                                                            n_lines=s.profilometer_lines,
+                                                            seed=base["profilometer"]["seed"]))
+            tried.append(stop_rules(frames, roller_x, stop, rest, s, rules, args.rules_from_mm,
+                                    measure).assign(**labels))
     rows = pd.concat(rows, ignore_index=True)
     args.out.mkdir(parents=True, exist_ok=True)
     rows.to_csv(args.out / f"{args.name}.csv", index=False)
@@ -233,6 +313,15 @@ def main(argv=None) -> int:
                  "nearest each distance of the roller's axis past the region's end, against the same run at rest: "
                  "mean change over the runs (% of the run at rest; smallest to largest).\n\n"
                  + past_table(past).to_markdown(index=False, floatfmt=".1f") + "\n")
+    if tried:
+        tried = pd.concat(tried, ignore_index=True)
+        tried.to_csv(args.out / f"{args.name}_rules.csv", index=False)
+        text += (f"\n## Stop rules tried on the frames\n\nEach rule checked on the movie's frames from "
+                 f"{args.rules_from_mm:g} mm past the region's end on: the roller would stop at the first frame "
+                 "ending that many frames in a row at which the region's particles move slower than that (RMS "
+                 "speed of a mean-mass particle with their mean kinetic energy); the four metrics over the region "
+                 "on that frame against the same run at rest (a rule never met: where the run stopped).\n\n"
+                 + rules_table(tried).to_markdown(index=False) + "\n")
     (args.out / f"{args.name}.md").write_text(text)
     print(text)
     return 0

@@ -107,7 +107,7 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
 
     # the kept movie: how far behind the roller the layer is laid, bin by bin
     assert layer_formation.main(["--runs", str(kept), "--level", "smoke", "--name", "formation", "--past-mm", "0,2",
-                                 "--out", str(tmp_path)]) == 0
+                                 "--stop-rules", "1e9:1,1e-9:1", "--rules-from-mm", "0", "--out", str(tmp_path)]) == 0
     bins = pd.read_csv(tmp_path / "formation.csv")
     rest = read_dump(run / "final.dump").atoms
     inside = rest["x"].between(bins["bin_start_mm"].min() * 1e-3, bins["bin_end_mm"].max() * 1e-3, inclusive="left")
@@ -126,6 +126,27 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
         assert at_rest[k] == pytest.approx(row[k], rel=1e-9)
     assert past["past_mm"].dropna().tolist() == [0.0, 2.0]  # the smoke roller stops 3 mm past the region
     assert "| default " in (tmp_path / "formation.md").read_text().split("travels on")[1]
+    rules = pd.read_csv(tmp_path / "formation_rules.csv").set_index("rule_mm_s")
+    # any speed is below 1e9 mm/s: the first frame past the region's end (the movie's frames are 2 mm apart);
+    # none is below 1e-9 mm/s: the rule is never met, the roller stops where the run stopped, at rest
+    assert rules.loc[1e9, "laid_before_end"] and 0 <= rules.loc[1e9, "stop_past_mm"] < 2.0
+    assert not rules.loc[1e-9, "laid_before_end"] and rules.loc[1e-9, "stop_past_mm"] == pytest.approx(3.0, abs=1e-3)
+    assert (rules.loc[1e-9, [f"{m}_change_pct" for m in METRICS.values()]] == 0).all()
+    table = (tmp_path / "formation.md").read_text().split("Stop rules")[1]
+    assert sum(line.startswith("|") for line in table.splitlines()) == 2 + 2  # header, rule, one row per rule
+
+
+def test_the_stop_rule_sees_the_regions_mean_kinetic_energy_and_needs_its_checks_in_a_row():
+    rho, r = 4000.0, 50e-6
+    m = rho * 4 / 3 * np.pi * r**3
+    atoms = pd.DataFrame({"x": [1e-3, 2e-3, 9e-3], "radius": [r, 2 * r, r], "vx": [3e-3, 0.0, 5.0],
+                          "vy": [0.0, 1e-3, 0.0], "vz": [4e-3, 0.0, 0.0]})
+    # in the region 0-5 mm: (m 25e-6 + 8 m 1e-6) / 2 = 16.5 m [m^2/s^2] per particle; the fast one is outside
+    assert layer_formation.region_speed(atoms, (0.0, 5e-3), rho, m) == pytest.approx(np.sqrt(16.5e-6))
+    assert layer_formation.region_speed(atoms.iloc[2:], (0.0, 5e-3), rho, m) == 0.0  # no particle: at rest
+    speeds = np.array([5.0, 0.5, 2.0, 0.5, 0.4, 0.1])
+    assert layer_formation.rule_stop(speeds, 1.0, 2) == 4 and layer_formation.rule_stop(speeds, 1.0, 1) == 1
+    assert layer_formation.rule_stop(speeds, 1.0, 4) is None and layer_formation.rule_stop(speeds, 10.0, 3) == 2
 
 
 def test_a_bin_is_complete_from_the_first_frame_after_which_it_stays_complete():
