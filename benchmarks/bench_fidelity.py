@@ -150,8 +150,8 @@ VARIANTS = {
                                   **pile(40, 5.0), "LEVEL.heap_start_mm": -8.0},
     # the roller stopped 8 and 12 mm past the region's end, not 4: the layer at x grows behind a forward-rolling
     # roller until it is about 4 mm past (benchmarks/layer_formation.py): is the region's layer complete?
-    "runout8": {"LEVEL.run_out_mm": 8.0},
-    "runout12": {"LEVEL.run_out_mm": 12.0},
+    "runout8": {"LEVEL.run_out_mm": 8.0, "LEVEL.run_out_max_mm": 8.0},
+    "runout12": {"LEVEL.run_out_mm": 12.0, "LEVEL.run_out_max_mm": 12.0},
     # the roller stops once the region's layer is laid (layer_laid), 2 to 12 mm past the region
     "laid": {"LEVEL.run_out_mm": 2.0, "LEVEL.run_out_max_mm": 12.0},
     # the substrate rough 8 mm past the region, not 0.5: the region's layer is laid while the roller's nip is
@@ -160,7 +160,8 @@ VARIANTS = {
     # rough wherever the powder goes, as the paper's plate: from behind the heap to past the latest stop
     "laid+roughall": {"LEVEL.run_out_mm": 2.0, "LEVEL.run_out_max_mm": 12.0, "LEVEL.rough_before_mm": 30.0,
                       "LEVEL.rough_past_mm": 30.0},
-    "E1e8+strip2.5+pile40+runout8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.run_out_mm": 8.0},
+    "E1e8+strip2.5+pile40+runout8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.run_out_mm": 8.0,
+                                     "LEVEL.run_out_max_mm": 8.0},
     # the substrate of the next (previous) replicate under this replicate's heap and feed: run at seed 0
     # (1), a layer shaped along x like its own seed's follows the powder, like the other seed's the substrate
     "substrate+1": {"substrate.seed": 8},

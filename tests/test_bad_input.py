@@ -71,7 +71,9 @@ def test_a_swept_integer_key_stays_an_integer():
     ("surrogate__cv_folds", 50, "exceeds the sweep's 45 points"),
     ("material__youngs_modulus_dem_Pa", 1000, "minimum of 5000000"),             # found by 5000 fuzz cases
     ("fidelity__smoke__youngs_modulus_dem_Pa", 1000, "minimum of 5000000"),
-    ("fidelity__default__run_out_mm", 299856, "fidelity.default.sampling_start_mm + sampling_length_mm + run_out_mm"),
+    ("fidelity__default__run_out_max_mm", 299856,
+     "fidelity.default.sampling_start_mm + sampling_length_mm + run_out_mm"),
+    ("fidelity__default__run_out_mm", 299856, "the latest stop, run_out_max_mm (12 mm)"),
     ("roller__diameter_mm", 2.6815615859885194e+157, "maximum of 1000"),        # found by 5000 fuzz cases at 1c56d9f
     ("roller__diameter_mm", 596477, "maximum of 1000"),                         # (an overflow; a message without it)
 ])

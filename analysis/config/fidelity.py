@@ -109,8 +109,8 @@ def scene(config: dict, level: str | None = None) -> Scene:
     run_out = lvl["run_out_mm"] * mm
     run_out_max = lvl.get("run_out_max_mm", lvl["run_out_mm"]) * mm
     if run_out_max < run_out:
-        refuse(f"fidelity.{level}.run_out_max_mm", lvl["run_out_max_mm"],
-               f"the latest stop must be at least run_out_mm ({lvl['run_out_mm']:g} mm) past the region")
+        refuse(f"fidelity.{level}.run_out_mm", lvl["run_out_mm"],
+               f"the roller may first stop there, past the latest stop, run_out_max_mm ({lvl['run_out_max_mm']:g} mm)")
     laid = config["layer_laid"]
     box = (heap_start - (2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
            sample_x1 + run_out_max + max(radius, feed_len) + 2 * mm,
