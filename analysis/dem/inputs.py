@@ -141,16 +141,16 @@ def feed_zone(s: Scene, x_axis: float, floor: float, axis_z: float) -> dict:
             "axis_z": axis_z, "radius": clear}
 
 
-def stop_checks(s: Scene, x0: float, speed: float) -> tuple[int, list[int]]:
+def stop_checks(s: Scene, x0: float, speed: float) -> tuple[int, list[int], int]:
     """Where a roller starting at ``x0`` [m] and moving at ``speed`` [m/s] stops: the steps of its
-    fixed travel (to ``s.travel_end``) and of the checks after it (every ``s.laid_check_every`` [m],
+    fixed travel (to ``s.travel_end``), of the checks after it (every ``s.laid_check_every`` [m],
     before ``s.travel_end_max``) at which it stops once the sampling region's layer is laid
-    (``layer_laid``). No checks when the level's stop is fixed."""
-    per_step = speed * s.timestep
+    (``layer_laid``), and of its longest travel (to ``s.travel_end_max``). No checks when the
+    level's stop is fixed."""
     fixed = ceil((s.travel_end - x0) / speed / s.timestep)
     last = ceil((s.travel_end_max - x0) / speed / s.timestep)
-    every = max(1, round(s.laid_check_every / per_step))
-    return fixed, list(range(fixed, last, every)) if last > fixed else []
+    every = max(1, round(s.laid_check_every / (speed * s.timestep)))
+    return fixed, list(range(fixed, last, every)) if last > fixed else [], last
 
 
 def travel_segments(travel_steps: int, checkpoints: list, feeds: list, resume_step: int = 0,
