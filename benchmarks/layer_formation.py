@@ -108,21 +108,27 @@ def formation(frames, roller_x: np.ndarray, stop: float, rest, density: float, b
         "stop_mm": stop * 1e3, "frames": len(frames)})
 
 
-def region_past(frames, roller_x: np.ndarray, stop: float, rest, substrate: Path, U_mm_s: float, s,
-                past_mm: list[float], profilometer_seed: int) -> pd.DataFrame:
-    """The four metrics over ``s``'s sampling region on the frame nearest each ``past_mm`` [mm] of the
-    roller's axis past the region's end (none past where it stopped), and at rest (``past_mm`` NaN)."""
+def region_metrics(run: Path, U_mm_s: float, s, profilometer_seed: int):
+    """``measure(frame)``: the four metrics [report units] over ``s``'s sampling region of a frame of
+    kept run ``run`` (on its own substrate), as the fidelity benchmark measures them."""
+    def measure(frame) -> dict:
+        return to_report_units(spread_layer_metrics(frame, s.sampling_region, U_mm_s * 1e-3, s.density,
+                                                    substrate=run / "substrate.stl", n_lines=s.profilometer_lines,
+                                                    seed=profilometer_seed))
+    return measure
+
+
+def region_past(frames, roller_x: np.ndarray, stop: float, s, past_mm: list[float], measure,
+                at_rest: dict) -> pd.DataFrame:
+    """The four metrics (``measure(frame)``, :func:`region_metrics`) over ``s``'s sampling region on the frame
+    nearest each ``past_mm`` [mm] of the roller's axis past the region's end (none past where it stopped),
+    and ``at_rest`` (``past_mm`` NaN)."""
     end = s.sampling_region[1]
-    measured = [(d, roller_x[k], frames[k]) for d in sorted(past_mm) if end + d * 1e-3 < stop
+    measured = [(d, roller_x[k], measure(frames[k])) for d in sorted(past_mm) if end + d * 1e-3 < stop
                 for k in [int(np.argmin(np.abs(roller_x - (end + d * 1e-3))))]]
-    measured.append((np.nan, np.nan, rest))
-    rows = []
-    for d, x, frame in measured:
-        report = to_report_units(spread_layer_metrics(frame, s.sampling_region, U_mm_s * 1e-3, s.density,
-                                                      substrate=substrate, n_lines=s.profilometer_lines,
-                                                      seed=profilometer_seed))
-        rows.append({"past_mm": d, "x_roller_mm": x * 1e3, **{k: report[k] for k in METRICS}})
-    return pd.DataFrame(rows)
+    measured.append((np.nan, np.nan, at_rest))
+    return pd.DataFrame([{"past_mm": d, "x_roller_mm": x * 1e3, **{k: report[k] for k in METRICS}}
+                         for d, x, report in measured])
 
 
 def region_speed(atoms: pd.DataFrame, region: tuple, density: float, mean_mass: float) -> float:
@@ -147,17 +153,17 @@ def rule_stop(speeds: np.ndarray, threshold: float, checks: int) -> int | None:
     return None
 
 
-def stop_rules(frames, roller_x: np.ndarray, stop: float, rest, s, rules: list, min_mm: float, measure) -> pd.DataFrame:
+def stop_rules(frames, roller_x: np.ndarray, stop: float, s, rules: list, min_mm: float, measure,
+               at_rest: dict) -> pd.DataFrame:
     """Where each ``(speed [mm/s], checks)`` rule, checked on the movie's frames from ``min_mm`` past the
-    region's end on, would have stopped the roller, and the four metrics there against the run at rest
-    (``measure(frame)``: the metrics of a frame). A rule never met stops where the run stopped."""
+    region's end on, would have stopped the roller, and the four metrics there (``measure(frame)``,
+    :func:`region_metrics`) against ``at_rest``. A rule never met stops where the run stopped."""
     end = s.sampling_region[1]
     first = end + min_mm * 1e-3 - 1e-9
     k_checks = [k for k in range(len(frames)) if first <= roller_x[k] < stop - 1e-9]
     speeds = np.array([region_speed(frames[k].atoms, s.sampling_region, s.density, s.mean_particle_mass)
                        for k in k_checks]) * 1e3
-    measured = {None: measure(rest)}  # by check index (None: at rest), each frame measured once
-    at_rest, rows = measured[None], []
+    measured, rows = {None: at_rest}, []  # by check index (None: at rest), each frame measured once
     for speed, checks in rules:
         i = rule_stop(speeds, speed, checks)
         x = roller_x[k_checks[i]] if i is not None else stop
@@ -279,17 +285,14 @@ def main(argv=None) -> int:
                       omega_rad_s=float(key["omega"]))
         frames, roller_x, stop, rest = read_movie(run)
         rows.append(formation(frames, roller_x, stop, rest, s.density, args.bin_mm * 1e-3).assign(**labels))
+        if past_mm or rules:
+            measure = region_metrics(run, labels["U_mm_s"], s, base["profilometer"]["seed"])
+            at_rest = measure(rest)  # once, for both tables
         if past_mm:
-            past.append(region_past(frames, roller_x, stop, rest, run / "substrate.stl", labels["U_mm_s"], s,
-                                    past_mm, base["profilometer"]["seed"]).assign(**labels))
+            past.append(region_past(frames, roller_x, stop, s, past_mm, measure, at_rest).assign(**labels))
         if rules:
-            def measure(frame, run=run, U=labels["U_mm_s"], s=s):
-                return to_report_units(spread_layer_metrics(frame, s.sampling_region, U * 1e-3, s.density,
-                                                            substrate=run / "substrate.stl",
-                                                            n_lines=s.profilometer_lines,
-                                                            seed=base["profilometer"]["seed"]))
-            tried.append(stop_rules(frames, roller_x, stop, rest, s, rules, args.rules_from_mm,
-                                    measure).assign(**labels))
+            tried.append(stop_rules(frames, roller_x, stop, s, rules, args.rules_from_mm, measure,
+                                    at_rest).assign(**labels))
     rows = pd.concat(rows, ignore_index=True)
     args.out.mkdir(parents=True, exist_ok=True)
     rows.to_csv(args.out / f"{args.name}.csv", index=False)
