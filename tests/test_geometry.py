@@ -46,19 +46,19 @@ def _surface_moments(x, z, x_range, m=8):
 
 
 def test_substrate_sq_and_correlation_length_measured_from_the_stl(config, meshes):
-    """The rough part (the region and half a mm each side) has the target Sq and correlation
-    length, measured from the written STL's vertices with numpy alone (the generator scales with
-    `geometry.substrate_rms`: not used here); the region itself is one patch of the field,
-    reported as it is."""
+    """The sampling region has the target Sq, and the rough part around it (the region, half a mm
+    before and 8 mm past it) is one field with the target correlation length, measured from the
+    written STL's vertices with numpy alone (the generator scales with `geometry.substrate_rms`:
+    not used here); the rest of the rough part is the same field, its Sq as it falls."""
     out, summary = meshes
     s = scene(config, "default")
     target = config["substrate"]["sq_um"] * 1e-6
     x, y, z = _stl_height_grid(out / "substrate.stl")
-    mean, sq = _surface_moments(x, z, s.rough_x)
-    assert sq == pytest.approx(target, rel=0.02)
-    assert abs(mean) < 0.2 * target                            # mean plane at z = 0
     region_mean, region_sq = _surface_moments(x, z, s.sampling_region[:2])
-    assert region_sq == pytest.approx(target, rel=0.1)
+    assert region_sq == pytest.approx(target, rel=0.02)
+    mean, sq = _surface_moments(x, z, s.rough_x)
+    assert sq == pytest.approx(target, rel=0.3)                # 4x the region's area: a few tens of % apart
+    assert abs(mean) < 0.2 * target                            # mean plane at z = 0
     assert summary["substrate_sq_m"] == pytest.approx(region_sq, rel=0.01)
     assert summary["substrate_mean_m"] == pytest.approx(region_mean, abs=0.01 * target)
     assert summary["substrate_peak_m"] == pytest.approx(z.max()) and z.max() < s.roller_gap
@@ -195,7 +195,7 @@ def test_users_stl_too_small_for_the_bed_is_refused(config, tmp_path):
 
 def test_substrate_reaching_the_roller_is_refused(tmp_path):
     mine = yaml.safe_load((ROOT / "config.yaml").read_text())
-    mine["substrate"]["sq_um"] = 150
+    mine["substrate"]["sq_um"] = 200     # capped at 270 um (0.9 x the 300 um gap): the region's Sq falls 5 %
     with pytest.raises(ConfigError, match="roller.gap_um"):
         make_geometry(load_config(mine), "smoke", tmp_path)
 

@@ -51,12 +51,15 @@ def height_field_mesh(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> trimesh.Tr
 
 def rough_substrate(x_range: tuple, width: float, spacing: float, correlation_length: float,
                     rms: float, seed: int, rough_x: tuple | None = None, taper: float = 0.0,
-                    flat_spacing: float | None = None, peak_cap: float | None = None) -> trimesh.Trimesh:
+                    flat_spacing: float | None = None, peak_cap: float | None = None,
+                    rms_x: tuple | None = None) -> trimesh.Trimesh:
     """A substrate over ``x_range`` x ``[0, width]`` [m], periodic across y.
 
     Rough (a Gaussian random field over ``rough_x``, default all of
-    ``x_range``, scaled so that the mesh's own area-weighted RMS height there
-    is ``rms``) where the layer is measured; outside, it ramps
+    ``x_range``, scaled so that the mesh's own area-weighted RMS height over
+    ``rms_x``, default ``rough_x``, is ``rms``: the sampling region's, so that
+    the layer is measured on the Sq asked for) around where the layer is
+    measured; outside, it ramps
     to the flat mean plane over ``taper`` [m] (a cosine window) and continues
     flat on a coarse grid of ``flat_spacing`` [m]: LIGGGHTS pays per triangle
     per step, and the heap's path needs no roughness.
@@ -87,7 +90,7 @@ def rough_substrate(x_range: tuple, width: float, spacing: float, correlation_le
     z = np.concatenate([z, z[:, :1]], axis=1)
     mesh = height_field_mesh(x, np.linspace(0.0, width, ny + 1), z)
     if rms > 0:  # linear facets lower the RMS below the nodes': calibrate the mesh itself
-        mesh.vertices[:, 2] *= rms / substrate_rms(mesh, rough_x)[1]
+        mesh.vertices[:, 2] *= rms / substrate_rms(mesh, rough_x if rms_x is None else rms_x)[1]
     if peak_cap is not None:
         np.minimum(mesh.vertices[:, 2], peak_cap, out=mesh.vertices[:, 2])
     return mesh

@@ -105,8 +105,8 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
         substrate = geometry.rough_substrate(s.substrate_x, s.strip_width, sub["grid_spacing"],
                                              sub["correlation_length"], sub["sq"], substrate_seed(config, replicate),
                                              rough_x=s.rough_x, taper=ROUGH_TAPER,
-                                             peak_cap=PEAK_CAP * s.roller_gap)
-        clipped_sq = geometry.substrate_rms(substrate, s.rough_x)[1]
+                                             peak_cap=PEAK_CAP * s.roller_gap, rms_x=s.sampling_region[:2])
+        clipped_sq = geometry.substrate_rms(substrate, s.sampling_region[:2])[1]
         if clipped_sq < 0.99 * sub["sq"]:
             raise ConfigError(f"config key 'roller.gap_um' = {s.roller_gap * 1e6:g}: the substrate's peaks reach "
                               f"the roller; clipping them at {PEAK_CAP:g} x the gap would lower Sq from "
