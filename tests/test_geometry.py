@@ -61,10 +61,11 @@ def test_substrate_sq_and_correlation_length_measured_from_the_stl(config, meshe
     assert abs(mean) < 0.2 * target                            # mean plane at z = 0
     assert summary["substrate_sq_m"] == pytest.approx(region_sq, rel=0.01)
     assert summary["substrate_mean_m"] == pytest.approx(region_mean, abs=0.01 * target)
-    assert summary["substrate_peak_m"] == pytest.approx(z.max()) and z.max() < s.roller_gap
+    assert summary["substrate_peak_m"] == pytest.approx(z.max())
+    assert z.max() - region_mean <= 0.9 * s.roller_gap + 1e-9                 # capped under the gap set from it
     # The field's autocorrelation is exp(-r^2 / lc^2): at a lag of lc along the travel the rough
     # nodes' normalised autocovariance is 1/e, so lc = lag / sqrt(-ln C(lag)). Over the default's
-    # 4 x 1.2 mm (about 50 correlation areas) this estimate scatters by about 10 % between seeds.
+    # 12 x 1.2 mm (about 150 correlation areas) this estimate scatters by a few % between seeds.
     lc = config["substrate"]["correlation_length_um"] * 1e-6
     rough_x = x[(x >= s.rough_x[0]) & (x <= s.rough_x[1])]
     h = z[(x >= s.rough_x[0]) & (x <= s.rough_x[1]), :-1]      # the last column repeats the first

@@ -66,7 +66,9 @@ def rough_substrate(x_range: tuple, width: float, spacing: float, correlation_le
 
     ``peak_cap`` [m] clips the rare highest nodes (a big field's extremes
     pass 4 Sq: the paper level's 25 x 70 mm reaches 4.5 Sq, through the
-    roller's gap); the clip barely moves Sq (reported by `substrate_rms`).
+    roller's gap) that far above the mean plane over ``rms_x`` (the datum the
+    roller's gap is set from; z = 0 without ``rms_x``); the clip barely moves
+    Sq (reported by `substrate_rms`).
 
     The node spacing across y is adjusted so that a whole number of cells fits
     the strip; the row at y = width repeats the row at y = 0, so the surface
@@ -92,7 +94,8 @@ def rough_substrate(x_range: tuple, width: float, spacing: float, correlation_le
     if rms > 0:  # linear facets lower the RMS below the nodes': calibrate the mesh itself
         mesh.vertices[:, 2] *= rms / substrate_rms(mesh, rough_x if rms_x is None else rms_x)[1]
     if peak_cap is not None:
-        np.minimum(mesh.vertices[:, 2], peak_cap, out=mesh.vertices[:, 2])
+        datum = 0.0 if rms_x is None else substrate_rms(mesh, rms_x)[0]
+        np.minimum(mesh.vertices[:, 2], datum + peak_cap, out=mesh.vertices[:, 2])
     return mesh
 
 

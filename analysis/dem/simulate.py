@@ -112,12 +112,12 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
                               f"the roller; clipping them at {PEAK_CAP:g} x the gap would lower Sq from "
                               f"{sub['sq'] * 1e6:.0f} to {clipped_sq * 1e6:.0f} um")
     peak = substrate.vertices[:, 2].max()
-    if peak >= s.roller_gap:
+    mean, sq = geometry.substrate_rms(substrate, s.sampling_region[:2])  # the gap's datum
+    if peak >= mean + s.roller_gap:
         raise ConfigError(f"config key 'roller.gap_um' = {s.roller_gap * 1e6:g}: the substrate's highest peak "
-                          f"({peak * 1e6:.0f} um) reaches the roller")
+                          f"({(peak - mean) * 1e6:.0f} um above the sampling region's mean plane) reaches the roller")
     if substrate.vertices[:, 2].min() <= s.box[4]:
         raise ConfigError(f"substrate reaches below the simulation box (z = {s.box[4]:.4g} m)")
-    mean, sq = geometry.substrate_rms(substrate, s.sampling_region[:2])
     paths = {"substrate": geometry.write_stl(substrate, out / "substrate.stl"),
              "roller": geometry.write_stl(geometry.roller(2 * s.roller_radius, s.strip_width, s.roller_facets),
                                           out / "roller.stl"),
