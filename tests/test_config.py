@@ -70,6 +70,7 @@ def test_shipped_config_is_valid_and_has_the_papers_design(base):
     ("fidelity.default.feed_pile_mg_per_mm", -3, "feed_pile_mg_per_mm"),
     ("maps.operating_window.min_coverage_pct", 150, "maps.operating_window.min_coverage_pct"),
     ("maps.operating_window.max_void_fraction_pct", -2, "maps.operating_window.max_void_fraction_pct"),
+    ("substrate.peak_cap_fraction_of_gap", 1.2, "peak_cap_fraction_of_gap"),
     ("fidelity.default.run_out_max_mm", 1.5, "run_out_max_mm (1.5 mm)"),  # before the earliest stop (2 mm)
     ("layer_laid.checks", 0, "layer_laid.checks"),
 ])

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.config.errors import ConfigError, refuse
-from analysis.config.fidelity import PEAK_CAP, scene
+from analysis.config.fidelity import scene
 from analysis.config.reading import check_finite, validate_schema
 from analysis.config.sweep import (
     EXECUTION_KEYS,
@@ -229,7 +229,7 @@ def check_swept_gap(config: dict, value: float) -> None:
     if value < gap:
         refuse("sweep.roller.gap_um", value,
               f"is below roller.gap_um = {gap!r}, the gap the heap is settled and the substrate's peaks "
-              f"are capped under (at {PEAK_CAP:g} x) for every swept gap: set roller.gap_um to the "
+              f"are capped under (substrate.peak_cap_fraction_of_gap) for every swept gap: set roller.gap_um to the "
               "smallest swept gap")
     spread, heap_box = scene(resolve(config, {"roller.gap_um": value})), scene(config).box
     if spread.box[1] > heap_box[1] or spread.roller_gap + 2 * spread.roller_radius > heap_box[5]:

@@ -7,11 +7,6 @@ from math import sqrt
 from analysis.config.errors import refuse
 from analysis.physics import INSERTION_SOLID_FRACTION, feed_length, number_mean_volume, psd_classes, rayleigh_time
 
-#: The generated substrate's peaks are clipped at this fraction of ``roller.gap_um``
-#: (3.4 Sq at the configured 300 um gap and Sq 79 um): otherwise the paper
-#: level's large field puts a node through the roller.
-PEAK_CAP = 0.9
-
 
 @dataclass(frozen=True)
 class Scene:
@@ -138,7 +133,8 @@ def scene(config: dict, level: str | None = None) -> Scene:
         checkpoints_per_run=lvl.get("checkpoints_per_run", 0),
         feed_pile_mass=feed_pile_mass, feed_length=feed_len, feed_every=lvl.get("feed_every_mm", FEED_EVERY_MM) * mm,
         substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
-                   "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "mesh": sub["mesh"]},
+                   "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "mesh": sub["mesh"],
+                   "peak_cap": sub["peak_cap_fraction_of_gap"] * config["roller"]["gap_um"] * um},
         rough_x=(sample_x0 - lvl.get("rough_before_mm", 0.5) * mm, sample_x1 + lvl.get("rough_past_mm", 0.5) * mm),
         box=box,
         substrate_x=box[:2],

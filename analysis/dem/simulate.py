@@ -27,7 +27,7 @@ import numpy as np
 
 from analysis.config.checks import MAX_RUN_STEPS
 from analysis.config.errors import ConfigError
-from analysis.config.fidelity import PEAK_CAP, Scene, scene
+from analysis.config.fidelity import Scene, scene
 from analysis.config.load import load_config
 from analysis.config.sweep import resolve
 from analysis.dem import geometry
@@ -105,11 +105,12 @@ def make_geometry(config: dict, level: str, outdir: str | Path, base_dir: Path =
         substrate = geometry.rough_substrate(s.substrate_x, s.strip_width, sub["grid_spacing"],
                                              sub["correlation_length"], sub["sq"], substrate_seed(config, replicate),
                                              rough_x=s.rough_x, taper=ROUGH_TAPER,
-                                             peak_cap=PEAK_CAP * s.roller_gap, rms_x=s.sampling_region[:2])
+                                             peak_cap=sub["peak_cap"], rms_x=s.sampling_region[:2])
         clipped_sq = geometry.substrate_rms(substrate, s.sampling_region[:2])[1]
         if clipped_sq < 0.99 * sub["sq"]:
             raise ConfigError(f"config key 'roller.gap_um' = {s.roller_gap * 1e6:g}: the substrate's peaks reach "
-                              f"the roller; clipping them at {PEAK_CAP:g} x the gap would lower Sq from "
+                              f"the roller; clipping them at {sub['peak_cap'] * 1e6:.0f} um "
+                              f"(substrate.peak_cap_fraction_of_gap) would lower the sampling region's Sq from "
                               f"{sub['sq'] * 1e6:.0f} to {clipped_sq * 1e6:.0f} um")
     peak = substrate.vertices[:, 2].max()
     mean, sq = geometry.substrate_rms(substrate, s.sampling_region[:2])  # the gap's datum
