@@ -157,6 +157,10 @@ VARIANTS = {
     # the substrate rough 8 mm past the region, not 0.5: the region's layer is laid while the roller's nip is
     # 4-7.5 mm past it, over flat bed unless the patch reaches there (the roller stops as `laid`'s)
     "laid+rough8": {"LEVEL.run_out_mm": 2.0, "LEVEL.run_out_max_mm": 12.0, "LEVEL.rough_past_mm": 8.0},
+    # rough 8 mm past, its peaks clipped at 0.6 of the gap (180 um, 2.3 Sq) above the region's mean plane: the
+    # smallest particle (121 um at `default`) clears every peak under the roller; 0.9 (270 um) blew runs up
+    "laid+rough8+cap0.6": {"LEVEL.run_out_mm": 2.0, "LEVEL.run_out_max_mm": 12.0, "LEVEL.rough_past_mm": 8.0,
+                           "substrate.peak_cap_fraction_of_gap": 0.6},
     # rough wherever the powder goes, as the paper's plate: from behind the heap to past the latest stop
     "laid+roughall": {"LEVEL.run_out_mm": 2.0, "LEVEL.run_out_max_mm": 12.0, "LEVEL.rough_before_mm": 30.0,
                       "LEVEL.rough_past_mm": 30.0},
