@@ -48,8 +48,8 @@ def _surface_moments(x, z, x_range, m=8):
 def test_substrate_sq_and_correlation_length_measured_from_the_stl(config, meshes):
     """The sampling region has the target Sq, and the rough part around it (the region, half a mm
     before it and the level's ``rough_past_mm`` past it) is one field with the target correlation
-    length, measured from the written STL's vertices with numpy alone (the generator scales with `geometry.substrate_rms`:
-    not used here); the rest of the rough part is the same field, its Sq as it falls."""
+    length, measured from the written STL's vertices with numpy alone (the generator scales with
+    `geometry.substrate_rms`: not used here); the rest of the rough part is the same field, its Sq as it falls."""
     out, summary = meshes
     s = scene(config, "default")
     target = config["substrate"]["sq_um"] * 1e-6
