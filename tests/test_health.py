@@ -9,14 +9,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from analysis.config.fidelity import scene
 from analysis.dem.health import (
     BLOWUP_FLOOR_M_S,
     BLOWUP_SPEED_FACTOR,
+    blowup_limit,
     check_kinetic_energy,
     squeeze_out_speed,
     through_roller,
 )
-from analysis.dem.liggghts import LiggghtsError
+from analysis.dem.inputs import THERMO_EVERY
+from analysis.dem.liggghts import LiggghtsError, UnstableRunError, read_log
 from analysis.dem.simulate import make_geometry, settle
 from analysis.metrics.dataset import SupplyLimitedError, UnsoundRunError, check_run
 
@@ -115,10 +118,18 @@ def test_a_blown_up_settle_fails_loudly_and_publishes_nothing(config, tmp_path):
     unstable = copy.deepcopy(config)
     unstable["timestep"].update(rayleigh_fraction=1.2, max_rayleigh_fraction=100.0)
     make_geometry(unstable, "smoke", tmp_path / "meshes")
-    with pytest.raises(LiggghtsError, match="kinetic-energy blow-up"):
+    with pytest.raises(UnstableRunError, match="kinetic-energy blow-up.*stopped there"):
         settle(unstable, "smoke", tmp_path / "meshes", tmp_path / "settle")
     published = {p.name for p in (tmp_path / "settle").iterdir()}
     assert not published & {"settled.restart", "settled.dump", "health.json"}
+    # stopped during the run, within a few thermo lines of the first one past the limit
+    s = scene(unstable, "smoke")
+    thermo = read_log((tmp_path / "settle" / "settle.log").read_text())["thermo"]
+    limit = blowup_limit(squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
+    first = int(thermo["Step"][thermo["vmax"] > limit].iloc[0])
+    planned = s.settle_time / s.timestep
+    print(f"blown at step {first}, stopped at {int(thermo['Step'].iloc[-1])} of {planned:.0f}")
+    assert thermo["Step"].iloc[-1] < min(first + 20 * THERMO_EVERY, 0.5 * planned)
 
 
 def test_squeeze_threshold_is_three_wall_speeds_or_a_fall_from_the_feed_zone():

@@ -42,8 +42,8 @@ MAX_OVERLAP_ANYWHERE = 0.5
 #: runs squeeze single particles out of the roller's nip at up to 2.6 m/s; one
 #: at 0.4 T_R reached 6.65 m/s (under 1 m/s at 0.35 and 0.3 T_R), and unstable
 #: time steps reach 12-34 m/s (benchmarks/measured/stress.md, docs/scene_size.md).
-#: Checked on the thermo output during the run (every THERMO_EVERY steps), not
-#: only on the final state.
+#: Checked on the thermo output during the run (every THERMO_EVERY steps; the run
+#: is stopped at the first line past it), not only on the final state.
 BLOWUP_SPEED_FACTOR = 10
 
 
@@ -149,6 +149,14 @@ def squeeze_out_speed(density: float, youngs_modulus: float, poisson_ratio: floa
     return sqrt(4.0 * effective_modulus * overlap_fraction**2.5 / (5.0 * pi * density))
 
 
+def blowup_limit(wall_speed: float = 0.0, squeeze_speed: float = 0.0) -> float:
+    """The blow-up limit [m/s]: the largest of BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR x
+    ``wall_speed`` [m/s] (the fastest wall, the roller's surface) and ``squeeze_speed`` [m/s]
+    (``squeeze_out_speed``). :func:`analysis.dem.liggghts.run` stops a run at the first thermo
+    line past it; :func:`check_kinetic_energy` judges the finished log by it."""
+    return max(BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR * wall_speed, squeeze_speed)
+
+
 def check_kinetic_energy(log: dict, wall_speed: float = 0.0, squeeze_speed: float = 0.0) -> dict:
     """Refuse a run whose thermo output shows a non-finite kinetic energy or a
     particle faster than the blow-up limit: the largest of BLOWUP_FLOOR_M_S,
@@ -156,7 +164,7 @@ def check_kinetic_energy(log: dict, wall_speed: float = 0.0, squeeze_speed: floa
     surface) and ``squeeze_speed`` [m/s] (``squeeze_out_speed``). Returns the
     peak particle speed [m/s]."""
     thermo = log["thermo"]
-    limit = max(BLOWUP_FLOOR_M_S, BLOWUP_SPEED_FACTOR * wall_speed, squeeze_speed)
+    limit = blowup_limit(wall_speed, squeeze_speed)
     energy, vmax = thermo["KinEng"].to_numpy(), thermo["vmax"].to_numpy()
     bad = ~np.isfinite(energy) | ~np.isfinite(vmax)
     if bad.any():

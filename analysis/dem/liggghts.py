@@ -244,12 +244,64 @@ def _mpi_reason(output: str) -> str:
     return lines[-1] if lines else "no output"
 
 
-def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str | Path | None = None) -> dict:
+#: Seconds between two looks at a running log for a blow-up (:func:`run`'s ``abort_speed``).
+WATCH_EVERY_S = 2.0
+
+
+class _BlowupWatch:
+    """Reads a growing LIGGGHTS log's new complete lines; ``scan`` returns the first thermo row
+    (step, fastest particle [m/s]) whose ``vmax`` column is past ``limit`` [m/s] or not finite."""
+
+    def __init__(self, log_file: Path, limit: float):
+        self.log_file, self.limit, self.offset, self.column, self.width = log_file, limit, 0, None, 0
+
+    def scan(self) -> tuple[int, float] | None:
+        try:
+            with open(self.log_file, "rb") as f:
+                f.seek(self.offset)
+                chunk = f.read()
+        except FileNotFoundError:
+            return None
+        end = chunk.rfind(b"\n") + 1  # complete lines only: the rest is read next time
+        self.offset += end
+        for line in chunk[:end].decode(errors="replace").splitlines():
+            parts = line.split()
+            if parts[:2] == ["Step", "Atoms"]:
+                self.column, self.width = (parts.index("vmax") if "vmax" in parts else None), len(parts)
+            elif self.column is not None and len(parts) == self.width and parts[0].isdigit():
+                try:
+                    speed = float(parts[self.column])
+                except ValueError:
+                    speed = float("nan")
+                if not np.isfinite(speed) or speed > self.limit:
+                    return int(parts[0]), speed
+        return None
+
+
+def _stop(proc: subprocess.Popen, ranks: int) -> None:
+    """End a running LIGGGHTS: kill a single process; ask an MPI launcher to end its ranks
+    (SIGTERM, which it forwards), killing it if it has not within 30 s."""
+    if ranks == 1:
+        proc.kill()
+    else:
+        proc.terminate()
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str | Path | None = None,
+        abort_speed: float | None = None) -> dict:
     """Run LIGGGHTS on ``input_file``; return the parsed log (see :func:`read_log`).
 
     The screen output goes to ``<log_file>.screen``. Raises
     :class:`LiggghtsError` naming the ERROR line and the input command it died
-    at, or the tail of the screen when LIGGGHTS died without one.
+    at, or the tail of the screen when LIGGGHTS died without one. With ``abort_speed``
+    [m/s], the log is watched while LIGGGHTS runs (every :data:`WATCH_EVERY_S` s) and the
+    run is stopped at the first thermo line whose fastest particle (``vmax``) is past it,
+    raising :class:`UnstableRunError`: a blown-up run costs no more CPU than it took to blow up.
     """
     input_file, log_file = Path(input_file).resolve(), Path(log_file).resolve()
     if shutil.which(LIGGGHTS) is None:
@@ -262,10 +314,29 @@ def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str |
         _checked(tuple(prefix), ranks, source)
     cmd = mpi_command(ranks, prefix) + [LIGGGHTS, "-in", str(input_file), "-log", str(log_file)]
     start, cpu_start = time.perf_counter(), children_cpu()
+    blown, watch = None, _BlowupWatch(log_file, abort_speed) if abort_speed else None
+    if watch:
+        log_file.unlink(missing_ok=True)  # a previous attempt's log is not this run's
     with open(screen, "w") as out:
-        proc = subprocess.run(cmd, cwd=cwd or input_file.parent, stdout=out, stderr=subprocess.STDOUT,
-                              stdin=subprocess.DEVNULL, env=launcher_env() if prefix else None)
+        proc = subprocess.Popen(cmd, cwd=cwd or input_file.parent, stdout=out, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, env=launcher_env() if prefix else None)
+        try:
+            while blown is None:
+                try:
+                    proc.wait(timeout=WATCH_EVERY_S if watch else None)
+                    break
+                except subprocess.TimeoutExpired:
+                    blown = watch.scan()
+            if blown:
+                _stop(proc, ranks)
+        except BaseException:  # interrupted (Ctrl-C, a job's SIGTERM): take LIGGGHTS down too
+            _stop(proc, ranks)
+            raise
     wall, cpu = time.perf_counter() - start, children_cpu() - cpu_start
+    if blown:
+        raise UnstableRunError(f"unsound run: kinetic-energy blow-up, a particle at {blown[1]:.3g} m/s at step "
+                               f"{blown[0]} (limit {abort_speed:.3g} m/s), stopped there after {wall:.0f} s: lower "
+                               f"the time step; full log: {log_file}")
     log_text = log_file.read_text(errors="replace") if log_file.exists() else ""
     screen_text = screen.read_text(errors="replace")
     error = _error_message(log_text + "\n" + screen_text)

@@ -34,6 +34,7 @@ from analysis.dem import geometry
 from analysis.dem.health import (
     MAX_STRAYS,
     SQUEEZE_FACTOR,
+    blowup_limit,
     check_kinetic_energy,
     check_timestep,
     feed_health,
@@ -184,9 +185,11 @@ def settle(config: dict, level: str, meshes: str | Path, outdir: str | Path, rep
                   restart="settled.restart.part", dump="settled.dump.part",
                   stray_x=s.sampling_region[0] - max(s.diameters), max_strays=MAX_STRAYS)
     (out / "settle.in").write_text(text)
-    log = ran(run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks), out / "settle.in")
+    squeeze_speed = squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio)
+    log = ran(run(out / "settle.in", out / "settle.log", ranks=s.mpi_ranks,
+                  abort_speed=blowup_limit(squeeze_speed=squeeze_speed)), out / "settle.in")
     check_timestep(log, s)
-    peak = check_kinetic_energy(log, squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
+    peak = check_kinetic_energy(log, squeeze_speed=squeeze_speed)
     if log["inserted"] != s.heap_particles:
         raise LiggghtsError(f"inserted {log['inserted']} of {s.heap_particles} particles: the heap region is too "
                             "small for heap_particles (see fidelity level)")
@@ -372,8 +375,12 @@ def run_with_resume(plan: SpreadPlan) -> dict:
                 (out / folder).mkdir()
             (out / CHECKPOINT_DIR / "input.sha256").write_text(fingerprint)
         (out / "spread.in").write_text(fresh if restart is None else plan.render(step, restart))
+        limit = blowup_limit(plan.wall_speed, squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
         try:
-            return ran(run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks), out / "spread.in")
+            return ran(run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks, abort_speed=limit),
+                       out / "spread.in")
+        except UnstableRunError:  # the physics, not the checkpoint: an older one would blow up too
+            raise
         except LiggghtsError as err:
             if restart is None:
                 raise
