@@ -19,7 +19,7 @@ from analysis.dem.health import (
     through_roller,
 )
 from analysis.dem.inputs import THERMO_EVERY
-from analysis.dem.liggghts import LiggghtsError, UnstableRunError, read_log
+from analysis.dem.liggghts import BlowupWatch, LiggghtsError, UnstableRunError, read_log
 from analysis.dem.simulate import make_geometry, settle
 from analysis.metrics.dataset import SupplyLimitedError, UnsoundRunError, check_run
 
@@ -202,3 +202,20 @@ def test_a_jam_under_the_stopped_roller_is_reported_not_refused_but_one_elsewher
         layer_health(atoms(axis[0]), s, stl, 4)
     with pytest.raises(LiggghtsError, match=r"largest overlap 60.0% of a radius exceeds 50%"):
         layer_health(atoms(axis[0] - 10e-3), s, stl, 4, roller=axis)   # on the bed behind the roller
+
+
+def test_blowup_watch_reads_only_complete_thermo_lines_of_a_growing_log(tmp_path):
+    """The watch sees a row only once its line is complete, finds vmax by the header's name,
+    and reports the first row past the limit (or not finite) with its step."""
+    log = tmp_path / "spread.log"
+    watch = BlowupWatch(log, limit=5.0)
+    assert watch.scan() is None                                   # no log yet
+    log.write_text("Step Atoms KinEng rke vmax CPU\n1000 10 1e-9 1e-9 0.4 0.1\n2000 10 1e-9 1e-9 7.")
+    assert watch.scan() is None                                   # 7.x is half written
+    with open(log, "a") as f:
+        f.write("5 0.2\n3000 10 1e-9 1e-9 9.0 0.3\n")
+    assert watch.scan() == (2000, 7.5)
+    nan = BlowupWatch(log, limit=5.0)
+    log.write_text("Step Atoms KinEng vmax\n1000 10 nan nan\n")
+    step, speed = nan.scan()
+    assert step == 1000 and np.isnan(speed)

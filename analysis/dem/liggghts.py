@@ -248,7 +248,7 @@ def _mpi_reason(output: str) -> str:
 WATCH_EVERY_S = 2.0
 
 
-class _BlowupWatch:
+class BlowupWatch:
     """Reads a growing LIGGGHTS log's new complete lines; ``scan`` returns the first thermo row
     (step, fastest particle [m/s]) whose ``vmax`` column is past ``limit`` [m/s] or not finite."""
 
@@ -314,7 +314,7 @@ def run(input_file: str | Path, log_file: str | Path, ranks: int = 1, cwd: str |
         _checked(tuple(prefix), ranks, source)
     cmd = mpi_command(ranks, prefix) + [LIGGGHTS, "-in", str(input_file), "-log", str(log_file)]
     start, cpu_start = time.perf_counter(), children_cpu()
-    blown, watch = None, _BlowupWatch(log_file, abort_speed) if abort_speed else None
+    blown, watch = None, BlowupWatch(log_file, abort_speed) if abort_speed else None
     if watch:
         log_file.unlink(missing_ok=True)  # a previous attempt's log is not this run's
     with open(screen, "w") as out:
