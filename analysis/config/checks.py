@@ -96,9 +96,10 @@ def check_physics(config: dict, base_dir: Path = Path(".")) -> None:
     cap = sub["peak_cap_fraction_of_gap"] * gap
     if mesh is None and cap < 2 * sub["sq_um"]:
         refuse("substrate.peak_cap_fraction_of_gap", sub["peak_cap_fraction_of_gap"],
-               f"clips the generated substrate {cap:.0f} um above its mean plane (x roller.gap_um = {gap}), under "
-               f"2 x substrate.sq_um = {sub['sq_um']}: a Gaussian surface has 2.3 % of its area above 2 Sq, and "
-               "clipped there it is no longer one; raise the fraction or the gap, or lower the Sq")
+               f"clips the generated substrate {cap:.0f} um (that fraction of roller.gap_um = {gap}) above the "
+               f"region's mean plane, under 2 x substrate.sq_um = {sub['sq_um']}: a Gaussian surface has 2.3 % of "
+               "its area above 2 Sq, and clipped there it is no longer one; raise the fraction or the gap, or lower "
+               "the Sq")
     for name, lvl in config["fidelity"].items():
         width = lvl.get("sampling_width_mm", lvl["strip_width_mm"])
         if width > lvl["strip_width_mm"]:
