@@ -148,8 +148,18 @@ def test_a_gap_below_the_configs_own_is_refused_naming_the_fix(base):
         load_config(with_sweep(base, **{"roller.gap_um": [200, 300, 400]}))
     config = copy.deepcopy(base)
     config["roller"]["gap_um"] = 200
+    config["substrate"]["peak_cap_fraction_of_gap"] = 0.8   # its peaks clipped at 160 um, 2 Sq
     config = load_config(with_sweep(config, **{"roller.gap_um": [200, 300, 400]}))
     assert {r.heap for r in sweep_runs(config)} == {"r0"}
+
+
+def test_a_swept_sq_is_judged_against_the_peak_cap_at_the_configs_own_gap(base):
+    """Each Sq settles its own substrate, capped at 0.6 x the config's 300 um gap (180 um):
+    under 2 Sq at Sq 100 um; a swept gap does not move the cap."""
+    load_config(with_sweep(base, **{"substrate.sq_um": [79, 90]}))
+    with pytest.raises(ConfigError, match=r"'sweep.substrate.sq_um' = 100: .*peak_cap_fraction_of_gap"):
+        load_config(with_sweep(base, **{"substrate.sq_um": [79, 100]}))
+    load_config(with_sweep(base, **{"substrate.sq_um": [79, 90], "roller.gap_um": [300, 400]}))
 
 
 def test_a_bad_swept_value_stops_snakemake_before_any_job(tmp_path):

@@ -14,6 +14,7 @@ from analysis.config.reading import check_finite, validate_schema
 from analysis.config.sweep import (
     EXECUTION_KEYS,
     SPEED_AXES,
+    SPREAD_ONLY_AXES,
     SWEEP_KEYS,
     config_value,
     resolve,
@@ -38,8 +39,23 @@ MAX_WALL_STEP = 0.1
 def check_config(config: dict, base_dir: Path = Path(".")) -> None:
     """Cross-key checks the schema cannot express, then the sweep's (:func:`check_sweep`)."""
     check_physics(config, base_dir)
+    check_peak_cap(config)
     check_sweep(config, base_dir)
     check_maps(config)
+
+
+def check_peak_cap(config: dict) -> None:
+    """The generated substrate's peaks are clipped at ``substrate.peak_cap_fraction_of_gap`` x
+    ``roller.gap_um`` above the region's mean plane: at least 2 Sq, or the surface is no longer
+    a Gaussian field's. The gap is the config's own: a swept gap spreads on the same substrate."""
+    sub, gap = config["substrate"], config["roller"]["gap_um"]
+    cap = sub["peak_cap_fraction_of_gap"] * gap
+    if sub["mesh"] is None and cap < 2 * sub["sq_um"]:
+        refuse("substrate.peak_cap_fraction_of_gap", sub["peak_cap_fraction_of_gap"],
+               f"clips the generated substrate {cap:.0f} um (that fraction of roller.gap_um = {gap}) above the "
+               f"region's mean plane, under 2 x substrate.sq_um = {sub['sq_um']}: a Gaussian surface has 2.3 % of "
+               "its area above 2 Sq, and clipped there it is no longer one; raise the fraction or the gap, or lower "
+               "the Sq")
 
 
 def check_maps(config: dict) -> None:
@@ -92,14 +108,6 @@ def check_physics(config: dict, base_dir: Path = Path(".")) -> None:
     mesh = config["substrate"]["mesh"]
     if mesh is not None and not (base_dir / mesh).is_file():
         refuse("substrate.mesh", mesh, "file not found")
-    sub = config["substrate"]
-    cap = sub["peak_cap_fraction_of_gap"] * gap
-    if mesh is None and cap < 2 * sub["sq_um"]:
-        refuse("substrate.peak_cap_fraction_of_gap", sub["peak_cap_fraction_of_gap"],
-               f"clips the generated substrate {cap:.0f} um (that fraction of roller.gap_um = {gap}) above the "
-               f"region's mean plane, under 2 x substrate.sq_um = {sub['sq_um']}: a Gaussian surface has 2.3 % of "
-               "its area above 2 Sq, and clipped there it is no longer one; raise the fraction or the gap, or lower "
-               "the Sq")
     for name, lvl in config["fidelity"].items():
         width = lvl.get("sampling_width_mm", lvl["strip_width_mm"])
         if width > lvl["strip_width_mm"]:
@@ -255,6 +263,7 @@ def check_variant(config: dict, values: dict, base_dir: Path, key: str, shown) -
         check_finite(resolved)
         validate_schema(resolved)
         check_physics(resolved, base_dir)
+        check_peak_cap(resolve(config, {k: v for k, v in values.items() if k not in SPREAD_ONLY_AXES}))
     except ConfigError as err:
         where = "in its place" if len(values) == 1 else "in that combination"
         raise ConfigError(f"config key {key!r} = {shown!r}: {where}, {err}") from None
