@@ -152,8 +152,13 @@ VARIANTS = {
     # roller until it is about 4 mm past (benchmarks/layer_formation.py): is the region's layer complete?
     "runout8": {"LEVEL.run_out_mm": 8.0, "LEVEL.run_out_max_mm": 8.0},
     "runout12": {"LEVEL.run_out_mm": 12.0, "LEVEL.run_out_max_mm": 12.0},
-    # the roller stops once the region's layer is laid (layer_laid), 2 to 12 mm past the region
-    "laid": {"LEVEL.run_out_mm": 2.0, "LEVEL.run_out_max_mm": 12.0},
+    # the roller stops once the region's layer is laid (layer_laid), 2 to 12 mm past the region, over a
+    # substrate rough 0.5 mm past it, peaks clipped at 0.9 of the gap (as measured, 2026-12-06/07)
+    "laid": {"LEVEL.run_out_mm": 2.0, "LEVEL.run_out_max_mm": 12.0, "LEVEL.rough_past_mm": 0.5,
+             "substrate.peak_cap_fraction_of_gap": 0.9},
+    # `laid` with the peaks clipped at 0.6 of the gap (180 um), as the 8 mm margin below
+    "laid+cap0.6": {"LEVEL.run_out_mm": 2.0, "LEVEL.run_out_max_mm": 12.0, "LEVEL.rough_past_mm": 0.5,
+                    "substrate.peak_cap_fraction_of_gap": 0.6},
     # the substrate rough 8 mm past the region, not 0.5: the region's layer is laid while the roller's nip is
     # 4-7.5 mm past it, over flat bed unless the patch reaches there (the roller stops as `laid`'s)
     "laid+rough8": {"LEVEL.run_out_mm": 2.0, "LEVEL.run_out_max_mm": 12.0, "LEVEL.rough_past_mm": 8.0},
