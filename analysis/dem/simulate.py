@@ -264,6 +264,13 @@ class SpreadPlan:
     skips: frozenset
     context: dict           # what every rendering of ``spread.in.j2`` shares
 
+    @property
+    def squeeze_out_speed(self) -> float:
+        """The speed [m/s] a particle leaves an overlap of a radius with (:func:`squeeze_out_speed`):
+        with ``wall_speed``, what the run's blow-up limit is made of, during the run and after it."""
+        s = self.s
+        return squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio)
+
     def render(self, step: int = 0, restart: Path | None = None) -> str:
         """``spread.in``: the input starting at ``step`` of the travel (0: from the settled heap), from
         ``restart`` (a checkpoint) when resumed."""
@@ -368,6 +375,7 @@ def run_with_resume(plan: SpreadPlan) -> dict:
     out, s = plan.out, plan.s
     fresh = plan.render(0, None)
     fingerprint = hashlib.sha256(fresh.encode()).hexdigest()
+    limit = blowup_limit(plan.wall_speed, plan.squeeze_out_speed)
     for step, restart in _checkpoints(out, fingerprint) + [(0, None)]:
         if restart is None:  # a fresh start: forget any other input's checkpoints and feed records
             for folder in (CHECKPOINT_DIR, FEED_DIR):
@@ -375,7 +383,6 @@ def run_with_resume(plan: SpreadPlan) -> dict:
                 (out / folder).mkdir()
             (out / CHECKPOINT_DIR / "input.sha256").write_text(fingerprint)
         (out / "spread.in").write_text(fresh if restart is None else plan.render(step, restart))
-        limit = blowup_limit(plan.wall_speed, squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
         try:
             return ran(run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks, abort_speed=limit),
                        out / "spread.in")
@@ -394,8 +401,7 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
     ``health.json`` holds. An unsound run raises :class:`~analysis.dem.liggghts.LiggghtsError`."""
     s, out, skips = plan.s, plan.out, plan.skips
     check_timestep(log, s)
-    health = check_kinetic_energy(log, wall_speed=plan.wall_speed,
-                                  squeeze_speed=squeeze_out_speed(s.density, s.youngs_modulus, s.poisson_ratio))
+    health = check_kinetic_energy(log, wall_speed=plan.wall_speed, squeeze_speed=plan.squeeze_out_speed)
     health.update(inrun_health(log, s))
     if not (out / "final.dump.part").is_file():
         tail = "\n".join((out / "spread.log.screen").read_text(errors="replace").strip().splitlines()[-8:])
