@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/bench_region.py --replicates DIR [--map results/default/runs]
-        [--regions 4-9,5-9,6-10.5,6-12] [--variant default] [--name region_noise]
+        [--regions 4-9,5-9,6-10.5,6-12] [--variant default] [--against REFERENCE] [--name region_noise]
         [--out benchmarks/measured]
 
 The run-in and run-out of a spread are a fixed cost per run, so a longer
@@ -18,6 +18,10 @@ new DEM:
 * ``--map``: a map's run folders (``results/<level>/runs``); their spread
   over the map's points at each region gives the signal, and each run's
   shift from the level's own region is the region's bias.
+* ``--against``: another kept variant in the same folder (a bigger, stiffer
+  reference), re-measured over the same regions: at each region, how far the
+  variant's point means lie from the reference's, in the reference's pooled
+  seed sd (as ``bench_fidelity.py --ladder`` judges a step).
 
 Each region spans ``start-end`` [mm] along the spreading direction
 (``--regions``; the level's own region is always one of them); across it,
@@ -60,13 +64,15 @@ KEPT = re.compile(r"(?P<variant>.+)_s(?P<seed>\d+)_U(?P<U>[-\d.]+)_w(?P<omega>[-
 MAP_RUN = re.compile(r"U(?P<U>[-\d.]+)_w(?P<omega>[-\d.]+)_r(?P<seed>\d+)$")
 
 
-def layers(replicates: Path | None, map_runs: Path | None, variant: str) -> list[dict]:
-    """The layers to measure: ``{source, seed, U_mm_s, omega_rad_s, dump, substrate}``."""
+def layers(replicates: Path | None, map_runs: Path | None, variant: str, against: str | None = None) -> list[dict]:
+    """The layers to measure: ``{source, seed, U_mm_s, omega_rad_s, dump, substrate}``; ``source`` is
+    ``replicates`` (the kept ``variant``), ``against`` (the kept ``against`` variant) or ``map``."""
     found = []
+    sources = {variant: "replicates", **({against: "against"} if against else {})}
     for folder in sorted(replicates.iterdir()) if replicates else []:
         m = KEPT.match(folder.name)
-        if m and m["variant"] == variant and (folder / "final.dump").exists():
-            found.append({"source": "replicates", "seed": int(m["seed"]), "U_mm_s": float(m["U"]),
+        if m and m["variant"] in sources and (folder / "final.dump").exists():
+            found.append({"source": sources[m["variant"]], "seed": int(m["seed"]), "U_mm_s": float(m["U"]),
                           "omega_rad_s": float(m["omega"]), "dump": folder / "final.dump",
                           "substrate": folder / "substrate.stl"})
     for folder in sorted(map_runs.iterdir()) if map_runs else []:
@@ -105,10 +111,14 @@ def measure(task) -> list[dict]:
 
 def summarise(runs: pd.DataFrame, own: str) -> pd.DataFrame:
     """Per region (``region_mm`` label): pooled seed sd (replicates), the map's spread, R_max, and the
-    shift from the level's own region ``own``, on the map's runs and on the replicates (paired)."""
+    shift from the level's own region ``own``, on the map's runs and on the replicates (paired); with
+    ``against`` rows (a reference variant), the largest distance of a point's replicate mean from the
+    reference's (``<m>_vs_ref_sd``, in the reference's pooled seed sd over that region) and the mean
+    change over the points (``<m>_vs_ref_pct``, % of the reference's means)."""
     point = ["U_mm_s", "omega_rad_s"]
     rep = runs[runs["source"] == "replicates"]
     mapped = runs[runs["source"] == "map"]
+    ref = runs[runs["source"] == "against"]
     labels = list(dict.fromkeys(runs.sort_values(["length_mm", "start_mm"])["region_mm"]))
     floor = {}  # the replicates' pooled seed sd per region: the workflow's noise floor (its pooled row)
     for label in labels:
@@ -135,6 +145,18 @@ def summarise(runs: pd.DataFrame, own: str) -> pd.DataFrame:
                 shift = (other[k] - base[k]).dropna() / sd.get((own, k), np.nan)
                 worst = shift.groupby(level=by).mean().abs().max() if len(shift) else np.nan
                 row[f"{name}_{source}_shift_sd"] = worst
+        if len(ref):
+            here, there = rep[rep["region_mm"] == label], ref[ref["region_mm"] == label]
+            ref_floor = noise_floor(there).set_index("point")
+            means = here.groupby(point)[list(METRICS)].mean()
+            ref_means = there.groupby(point)[list(METRICS)].mean()
+            shared = means.index.intersection(ref_means.index)
+            for k, name in METRICS.items():
+                ref_sd = float(ref_floor.loc[POOLED, f"{k}_sd"]) if POOLED in ref_floor.index else np.nan
+                diff = (means.loc[shared, k] - ref_means.loc[shared, k]).dropna()
+                row[f"{name}_vs_ref_sd"] = float(diff.abs().max() / ref_sd) if len(diff) and ref_sd > 0 else np.nan
+                row[f"{name}_vs_ref_pct"] = (float((100 * diff / ref_means.loc[diff.index, k]).mean())
+                                             if len(diff) else np.nan)
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -146,17 +168,21 @@ def main(argv=None) -> int:
     parser.add_argument("--level", default="default")
     parser.add_argument("--variant", default="default",
                         help="the kept variant (bench_fidelity.py's) whose replicates give the noise")
+    parser.add_argument("--against", default=None,
+                        help="a kept reference variant in the same folder: the variant's distance from it per region")
     parser.add_argument("--regions", default="4-9,5-9,6-10,6-12", help="regions start-end [mm], comma-separated")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--name", default="region_noise")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     args = parser.parse_args(argv)
-    if args.variant not in VARIANTS:
-        parser.error(f"--variant: {args.variant!r} is not one of bench_fidelity.py's variants")
+    for option, name in (("--variant", args.variant), ("--against", args.against)):
+        if name is not None and name not in VARIANTS:
+            parser.error(f"{option}: {name!r} is not one of bench_fidelity.py's variants")
     config = load_config(ROOT / "config.yaml")
     s = scene(config, args.level)
     x0, x1, y0, y1 = s.sampling_region
-    kept_y = scene(variant_config(config, args.level, VARIANTS[args.variant]), args.level).sampling_region[2:]
+    kept = {source: scene(variant_config(config, args.level, VARIANTS[name]), args.level)
+            for source, name in (("replicates", args.variant), ("against", args.against)) if name is not None}
     own = f"{x0 * 1e3:g}-{x1 * 1e3:g}"
     regions = {own: (x0, x1)}
     for label in args.regions.split(","):
@@ -167,12 +193,11 @@ def main(argv=None) -> int:
         if not b > a:
             parser.error(f"--regions: {label!r} ends before it starts")
         regions[f"{a:g}-{b:g}"] = (a * 1e-3, b * 1e-3)
-    regions = {source: [(label, (*x, *y)) for label, x in regions.items()]
-               for source, y in (("replicates", kept_y), ("map", (y0, y1)))}
-    heap = {"replicates": scene(variant_config(config, args.level, VARIANTS[args.variant]), args.level).heap_particles,
-            "map": s.heap_particles}
+    spans = {**{source: k.sampling_region[2:] for source, k in kept.items()}, "map": (y0, y1)}
+    regions = {source: [(label, (*x, *y)) for label, x in regions.items()] for source, y in spans.items()}
+    heap = {**{source: k.heap_particles for source, k in kept.items()}, "map": s.heap_particles}
     found = [{**layer, "heap_particles": heap[layer["source"]]}
-             for layer in layers(args.replicates, args.map, args.variant)]
+             for layer in layers(args.replicates, args.map, args.variant, args.against)]
     if not found:
         parser.error(f"no layers found under --replicates {args.replicates} (variant {args.variant!r}) "
                      f"or --map {args.map}")
@@ -196,12 +221,17 @@ def main(argv=None) -> int:
             f"{time.perf_counter() - started:.0f} s (no DEM: layers re-measured), by\n"
             f"`.venv/bin/python benchmarks/bench_region.py {command}`.\n\n"
             f"Layers: {counts.get('replicates', 0)} replicated runs (variant `{args.variant}`), "
-            f"{counts.get('map', 0)} map runs. The level's own region: {own} mm. M_s per its area.\n\n"
+            + (f"{counts.get('against', 0)} of the reference `{args.against}`, " if args.against else "")
+            + f"{counts.get('map', 0)} map runs. The level's own region: {own} mm. M_s per its area.\n\n"
             "- `<m>_sd_pct`: pooled seed sd over the replicated points, % of the mean;\n"
             "- `<m>_R_max`: sqrt(1 - sd^2 / var over the map's runs), the best R a surrogate can reach;\n"
             "- `<m>_map_shift_sd`: the largest mean shift of one omega's map runs (over its U's) from their "
             "values over the level's region, in that region's pooled seed sd; `<m>_rep_shift_sd`: the same "
             "for one point's replicates (the same layers, paired);\n"
+            + ("- `<m>_vs_ref_sd`: the largest distance of a point's mean from the reference's, in the reference's "
+               "pooled seed sd over that region; `<m>_vs_ref_pct`: the mean change over the points, % of the "
+               "reference's;\n" if args.against else "")
+            +
             "- the CSV's `fed_pct`: per layer and region, the share of the particles over the region that the "
             "feed added (ids above the settled heap's count).\n\n"
             + table.to_markdown(index=False, floatfmt=".2f") + "\n")

@@ -34,6 +34,21 @@ def test_a_region_is_scored_by_its_seed_sd_the_maps_spread_and_its_shift_from_th
     assert table.loc["6-12", "Q_s_map_shift_sd"] == pytest.approx(0.5)  # every metric scaled alike here
 
 
+def test_a_variant_is_judged_against_a_reference_variant_in_the_references_seed_sd_region_by_region():
+    """Two points; the reference's seed sd is sqrt(2) at each (pooled the same), the variant's means lie
+    +0.5 and -2 from the reference's 2 and 4: the largest distance is 2 / sqrt(2) reference sds, the mean
+    change (+25 % - 50 %) / 2; without reference rows there is no such column."""
+    runs = pd.DataFrame(
+        rows("replicates", "6-9", [2.0, 3.0], (70.0, 0.0)) + rows("replicates", "6-9", [1.5, 2.5], (70.0, 10.0))
+        + rows("against", "6-9", [1.0, 3.0], (70.0, 0.0)) + rows("against", "6-9", [3.0, 5.0], (70.0, 10.0))
+        + rows("map", "6-9", [2.0], (40.0, 0.0)) + rows("map", "6-9", [4.0], (40.0, 10.0)))
+    row = summarise(runs, own="6-9").set_index("region_mm").loc["6-9"]
+    assert row["M_s_vs_ref_sd"] == pytest.approx(2.0 / np.sqrt(2))
+    assert row["M_s_vs_ref_pct"] == pytest.approx((25.0 - 50.0) / 2)
+    assert row["Phi_vs_ref_sd"] == pytest.approx(2.0 / np.sqrt(2))  # every metric scaled alike
+    assert "M_s_vs_ref_sd" not in summarise(runs[runs["source"] != "against"], own="6-9")
+
+
 def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_levels_area(tmp_path):
     """A kept layer of ``E1e8+strip2.5+pile40`` at the smoke level (a 2.5 mm strip; the level's is 1 mm):
     a square lattice of 100 um spheres covers only y = 1.2-2.4 mm, so the level's 1 mm region would hold
