@@ -9,7 +9,15 @@ import pytest
 
 from analysis.config.load import load_config
 from analysis.metrics.dump import read_dump
-from benchmarks import bench_fidelity, bench_region, bench_stress, compare_maps, layer_formation, reference_front
+from benchmarks import (
+    bench_fidelity,
+    bench_region,
+    bench_stress,
+    compare_maps,
+    layer_formation,
+    reference_front,
+    travel_time,
+)
 from benchmarks.bench_fidelity import METRICS, convergence
 
 
@@ -134,6 +142,13 @@ def test_the_benchmark_runs_a_smoke_scene_through_liggghts_and_the_region_benchm
     assert (rules.loc[1e-9, [f"{m}_change_pct" for m in METRICS.values()]] == 0).all()
     table = (tmp_path / "formation.md").read_text().split("Stop rules")[1]
     assert sum(line.startswith("|") for line in table.splitlines()) == 2 + 2  # header, rule, one row per rule
+
+    # where along the travel the kept run's time went: every thermo interval in one phase, the run-in first
+    assert travel_time.main(["--runs", str(kept), "--level", "smoke", "--name", "travel", "--out", str(tmp_path)]) == 0
+    phases = pd.read_csv(tmp_path / "travel.csv").set_index("phase")
+    assert list(phases.index) == list(travel_time.PHASES) and (phases["time_s"] >= 0).all()
+    assert phases.loc["region", "travel_mm"] == pytest.approx(2.0, abs=0.2)  # the smoke region, 4.5-6.5 mm
+    assert phases.loc["run_in", "time_s"] > 0 and phases["time_s"].sum() <= row["wall_s"]
 
 
 def test_the_stop_rule_sees_the_regions_mean_kinetic_energy_and_needs_its_checks_in_a_row():
