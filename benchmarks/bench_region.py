@@ -178,6 +178,8 @@ def main(argv=None) -> int:
     for option, name in (("--variant", args.variant), ("--against", args.against)):
         if name is not None and name not in VARIANTS:
             parser.error(f"{option}: {name!r} is not one of bench_fidelity.py's variants")
+    if args.against == args.variant:
+        parser.error(f"--against: {args.against!r} is the variant itself; name a bigger, stiffer one")
     config = load_config(ROOT / "config.yaml")
     s = scene(config, args.level)
     x0, x1, y0, y1 = s.sampling_region

@@ -82,6 +82,8 @@ def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_
     assert measured.loc["4.5-7.5", "fed_pct"] == pytest.approx(50.0)
     with pytest.raises(SystemExit):
         bench_region.main(["--replicates", str(tmp_path / "kept"), "--variant", "strip9"])
+    with pytest.raises(SystemExit):
+        bench_region.main(["--replicates", str(tmp_path / "kept"), "--variant", "default", "--against", "default"])
 
 
 def test_a_swapped_layer_is_said_to_follow_the_realisation_its_profile_is_nearer_to(tmp_path):
