@@ -20,6 +20,11 @@ at its end:
 Writes ``<name>.csv`` (one row per run and phase: travel [mm], elapsed time [s], particle-steps) and
 ``<name>.md`` (per group of omega, forward rolling < 0, still, counter-rotating > 0: each phase's share of
 the time and of the travel, and its seconds per mm of travel).
+
+Where the runs keep their ``final.dump``, the layer laid before the sampling region (its particles'
+final x more than 1 mm short of it) is counted too, with the share of the run's particle-steps it
+takes after the roller's axis is ``--laid-lag-mm`` past each of its particles: what deleting that layer
+behind the roller would save (``<name>_laid.csv``, and a table in ``<name>.md``).
 """
 from __future__ import annotations
 
@@ -39,6 +44,7 @@ sys.path.insert(0, str(ROOT))  # run as a script: this checkout's `analysis` imp
 from analysis.config.fidelity import scene  # noqa: E402
 from analysis.config.load import load_config  # noqa: E402
 from analysis.dem.liggghts import read_log  # noqa: E402
+from analysis.metrics.dump import read_dump  # noqa: E402
 
 PHASES = ("run_in", "region", "run_out", "laid_checks")
 ROLLER = re.compile(r"^variable roller_stop_x equal (\S+)\+(\S+)\*step", re.MULTILINE)
@@ -82,6 +88,35 @@ def run_phases(folder: Path, edges: np.ndarray) -> list[dict]:
     return rows
 
 
+def laid_before_region(folder: Path, sampling_start: float, lag: float) -> dict:
+    """The layer a run laid before the sampling region (``sampling_start`` [m]; its particles' final x
+    more than 1 mm short of it, from ``final.dump``): their number, and the share of the run's
+    particle-steps they take after the roller's axis is ``lag`` [m] past each one's final x."""
+    text = (folder / "spread.in").read_text()
+    x0, dx = (float(v) for v in ROLLER.search(text).groups())
+    point = POINT.search(text.splitlines()[0])
+    thermo = read_log((folder / "spread.log").read_text())["thermo"]
+    step, atoms = thermo["Step"].to_numpy(float), thermo["Atoms"].to_numpy(float)
+    total = float(np.sum(np.clip(np.diff(step), 0, None) * atoms[1:]))
+    x = read_dump(folder / "final.dump").atoms["x"].to_numpy()
+    before = x[x < sampling_start - 1e-3]
+    past = np.clip(step[-1] - (before + lag - x0) / dx, 0.0, None)  # steps from the axis lag past to the stop
+    return {"run": folder.name, "U_mm_s": float(point.group(1)), "omega_rad_s": float(point.group(2)),
+            "laid_before_region": int(before.size), "particle_steps": total,
+            "share_after_lag_pct": 100 * float(past.sum()) / total}
+
+
+def summarise_laid(laid: pd.DataFrame) -> pd.DataFrame:
+    """Per group of omega and overall: runs, the median number of particles laid before the region, and
+    the share [%] of the group's particle-steps (summed over its runs) they take after the lag."""
+    laid = laid.assign(group=np.sign(laid["omega_rad_s"]).astype(int).map(GROUPS),
+                       saved=laid["share_after_lag_pct"] * laid["particle_steps"])
+    rows = [{"runs": group, "n": len(frame), "laid_before_region": frame["laid_before_region"].median(),
+             "share_after_lag_pct": frame["saved"].sum() / frame["particle_steps"].sum()}
+            for group, frame in [*laid.groupby("group", sort=False), ("all runs", laid)]]
+    return pd.DataFrame(rows)
+
+
 def summarise(runs: pd.DataFrame) -> pd.DataFrame:
     """Per group of omega and overall: each phase's share of the time and of the travel [%], and its
     seconds per mm of travel [s/mm], summed over the group's runs."""
@@ -105,6 +140,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=Path, required=True, help="a map's runs folder (results/<level>/runs)")
     parser.add_argument("--level", default="default", help="the level whose region and run-out the runs had")
+    parser.add_argument("--laid-lag-mm", type=float, default=8.0,
+                        help="how far past a particle of the layer laid before the region the roller's axis is "
+                             "when deleting it is counted as saving its particle-steps (mm)")
     parser.add_argument("--name", default="travel_time")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     args = parser.parse_args(argv)
@@ -131,6 +169,15 @@ def main(argv=None) -> int:
             "seconds where it has a core to itself), summed over the runs of each group; `_time_pct` and "
             "`_travel_pct`: each phase's share, `_s_per_mm`: its seconds per mm of travel.\n\n"
             + table.to_markdown(index=False, floatfmt=".1f") + "\n")
+    if all((f / "final.dump").exists() for f in folders):
+        laid = pd.DataFrame([laid_before_region(f, x0, args.laid_lag_mm * 1e-3) for f in folders])
+        laid.to_csv(args.out / f"{args.name}_laid.csv", index=False)
+        summary = summarise_laid(laid)
+        text += (f"\n## The layer laid before the region\n\nParticles whose final x is more than 1 mm short of "
+                 f"the region ({x0 * 1e3:g} mm), median per run, and the share of the runs' particle-steps they "
+                 f"take after the roller's axis is {args.laid_lag_mm:g} mm past each (what deleting them there "
+                 f"would save; `{args.name}_laid.csv` per run):\n\n"
+                 + summary.to_markdown(index=False, floatfmt=".1f") + "\n")
     (args.out / f"{args.name}.md").write_text(text)
     print(text)
     return 0

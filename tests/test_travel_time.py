@@ -46,3 +46,31 @@ def test_a_run_without_the_rollers_position_or_a_bad_level_is_refused(tmp_path):
         travel_time.main(["--runs", str(tmp_path / "runs"), "--level", "huge"])
     with pytest.raises(SystemExit):
         travel_time.main(["--runs", str(tmp_path / "nothing")])
+
+
+def write_dump(path, xs):
+    rows = "".join(f"{i + 1} 1 {x:g} 0.0005 0.0001 0.0001 0 0 0\n" for i, x in enumerate(xs))
+    path.write_text(f"ITEM: TIMESTEP\n23000\nITEM: NUMBER OF ATOMS\n{len(xs)}\nITEM: BOX BOUNDS ff pp ff\n"
+                    f"-0.02 0.03\n0 0.001\n-0.001 0.03\nITEM: ATOMS id type x y z radius vx vy vz\n{rows}")
+
+
+def test_the_layer_laid_before_the_region_is_counted_from_where_the_roller_passed_it(tmp_path):
+    """The axis at -10 mm + 1 um per step stops at step 23,000 (13 mm); 100 particles integrated throughout
+    (2.3e6 particle-steps). Of the final layer, the particles at 0 and 4 mm are laid before the region (6 mm,
+    less 1 mm); 5.5 and 7 mm are not. With an 8 mm lag the axis passes 8 mm at step 18,000 and 12 mm at
+    22,000: they would be deleted for 5,000 and 1,000 steps, 6,000 particle-steps, 0.26 % of the run's."""
+    folder = tmp_path / "runs" / "U70_w-15_r0"
+    make_run(folder, [[(0, 0.0), (23000, 10.0)]])
+    write_dump(folder / "final.dump", [0.0, 0.004, 0.0055, 0.007])
+    laid = travel_time.laid_before_region(folder, 0.006, 0.008)
+    assert laid["laid_before_region"] == 2
+    assert laid["particle_steps"] == pytest.approx(2.3e6)
+    assert laid["share_after_lag_pct"] == pytest.approx(100 * 6000 / 2.3e6)
+    make_run(tmp_path / "runs" / "U70_w10_r0", [[(0, 0.0), (23000, 10.0)]],
+             header="# spreadmap: one spreading pass, U = 70 mm/s, omega = 10 rad/s (level default).")
+    write_dump(tmp_path / "runs" / "U70_w10_r0" / "final.dump", [0.0055])
+    assert travel_time.main(["--runs", str(tmp_path / "runs"), "--name", "t", "--out", str(tmp_path)]) == 0
+    table = travel_time.summarise_laid(pd.read_csv(tmp_path / "t_laid.csv")).set_index("runs")
+    assert table.loc["counter-rotating (omega > 0)", "laid_before_region"] == 0
+    assert table.loc["all runs", "share_after_lag_pct"] == pytest.approx(100 * 6000 / 4.6e6)
+    assert "## The layer laid before the region" in (tmp_path / "t.md").read_text()
