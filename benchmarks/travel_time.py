@@ -57,11 +57,9 @@ def phase_edges(sampling_region: tuple, travel_end: float) -> np.ndarray:
     return np.array([sampling_region[0], sampling_region[1], travel_end])
 
 
-def run_phases(folder: Path, edges: np.ndarray) -> list[dict]:
-    """One row per phase of a run: travel [mm], elapsed time [s] and particle-steps in it.
-
-    The ``CPU`` column restarts at each ``run`` segment: an interval's time is the rise since the previous
-    thermo row, or the row's own value where the column fell (a new segment's first row)."""
+def read_run(folder: Path) -> dict:
+    """A finished spread, read once: its folder, point (``U_mm_s``, ``omega_rad_s``), the roller's axis
+    ``x0 + dx * step`` [m] and the log's thermo rows."""
     text = (folder / "spread.in").read_text()
     axis = ROLLER.search(text)
     point = POINT.search(text.splitlines()[0])
@@ -70,8 +68,17 @@ def run_phases(folder: Path, edges: np.ndarray) -> list[dict]:
     thermo = read_log((folder / "spread.log").read_text())["thermo"]
     if len(thermo) < 2 or "CPU" not in thermo:
         raise ValueError(f"{folder / 'spread.log'}: fewer than 2 thermo rows with a CPU column")
-    x0, dx = float(axis.group(1)), float(axis.group(2))
-    step, atoms, cpu = (thermo[c].to_numpy(float) for c in ("Step", "Atoms", "CPU"))
+    return {"folder": folder, "U_mm_s": float(point.group(1)), "omega_rad_s": float(point.group(2)),
+            "x0": float(axis.group(1)), "dx": float(axis.group(2)), "thermo": thermo}
+
+
+def run_phases(run: dict, edges: np.ndarray) -> list[dict]:
+    """One row per phase of a run (:func:`read_run`): travel [mm], elapsed time [s] and particle-steps in it.
+
+    The ``CPU`` column restarts at each ``run`` segment: an interval's time is the rise since the previous
+    thermo row, or the row's own value where the column fell (a new segment's first row)."""
+    x0, dx = run["x0"], run["dx"]
+    step, atoms, cpu = (run["thermo"][c].to_numpy(float) for c in ("Step", "Atoms", "CPU"))
     rise = np.diff(cpu)
     d_time = np.where(rise >= 0, rise, cpu[1:])
     d_steps = np.clip(np.diff(step), 0, None)
@@ -81,27 +88,23 @@ def run_phases(folder: Path, edges: np.ndarray) -> list[dict]:
     rows = []
     for k, name in enumerate(PHASES):
         sel = phase == k
-        rows.append({"run": folder.name, "U_mm_s": float(point.group(1)), "omega_rad_s": float(point.group(2)),
+        rows.append({"run": run["folder"].name, "U_mm_s": run["U_mm_s"], "omega_rad_s": run["omega_rad_s"],
                      "phase": name, "travel_mm": float(np.sum(x_end[sel] - x_start[sel]) * 1e3),
                      "time_s": float(d_time[sel].sum()),
                      "particle_steps": float(np.sum(d_steps[sel] * atoms[1:][sel]))})
     return rows
 
 
-def laid_before_region(folder: Path, sampling_start: float, lag: float) -> dict:
-    """The layer a run laid before the sampling region (``sampling_start`` [m]; its particles' final x
-    more than 1 mm short of it, from ``final.dump``): their number, and the share of the run's
-    particle-steps they take after the roller's axis is ``lag`` [m] past each one's final x."""
-    text = (folder / "spread.in").read_text()
-    x0, dx = (float(v) for v in ROLLER.search(text).groups())
-    point = POINT.search(text.splitlines()[0])
-    thermo = read_log((folder / "spread.log").read_text())["thermo"]
-    step, atoms = thermo["Step"].to_numpy(float), thermo["Atoms"].to_numpy(float)
+def laid_before_region(run: dict, sampling_start: float, lag: float) -> dict:
+    """The layer a run (:func:`read_run`) laid before the sampling region (``sampling_start`` [m]; its
+    particles' final x more than 1 mm short of it, from ``final.dump``): their number, and the share of the
+    run's particle-steps they take after the roller's axis is ``lag`` [m] past each one's final x."""
+    step, atoms = (run["thermo"][c].to_numpy(float) for c in ("Step", "Atoms"))
     total = float(np.sum(np.clip(np.diff(step), 0, None) * atoms[1:]))
-    x = read_dump(folder / "final.dump").atoms["x"].to_numpy()
+    x = read_dump(run["folder"] / "final.dump").atoms["x"].to_numpy()
     before = x[x < sampling_start - 1e-3]
-    past = np.clip(step[-1] - (before + lag - x0) / dx, 0.0, None)  # steps from the axis lag past to the stop
-    return {"run": folder.name, "U_mm_s": float(point.group(1)), "omega_rad_s": float(point.group(2)),
+    past = np.clip(step[-1] - (before + lag - run["x0"]) / run["dx"], 0.0, None)  # from the axis lag past to the stop
+    return {"run": run["folder"].name, "U_mm_s": run["U_mm_s"], "omega_rad_s": run["omega_rad_s"],
             "laid_before_region": int(before.size), "particle_steps": total,
             "share_after_lag_pct": 100 * float(past.sum()) / total}
 
@@ -154,7 +157,8 @@ def main(argv=None) -> int:
     folders = sorted(p.parent for p in args.runs.rglob("spread.in") if (p.parent / "spread.log").exists())
     if not folders:
         parser.error(f"--runs {args.runs}: no folder with spread.in and spread.log under it")
-    runs = pd.DataFrame([row for folder in folders for row in run_phases(folder, edges)])
+    read = [read_run(folder) for folder in folders]
+    runs = pd.DataFrame([row for run in read for row in run_phases(run, edges)])
     table = summarise(runs)
     args.out.mkdir(parents=True, exist_ok=True)
     runs.to_csv(args.out / f"{args.name}.csv", index=False)
@@ -170,7 +174,7 @@ def main(argv=None) -> int:
             "`_travel_pct`: each phase's share, `_s_per_mm`: its seconds per mm of travel.\n\n"
             + table.to_markdown(index=False, floatfmt=".1f") + "\n")
     if all((f / "final.dump").exists() for f in folders):
-        laid = pd.DataFrame([laid_before_region(f, x0, args.laid_lag_mm * 1e-3) for f in folders])
+        laid = pd.DataFrame([laid_before_region(run, x0, args.laid_lag_mm * 1e-3) for run in read])
         laid.to_csv(args.out / f"{args.name}_laid.csv", index=False)
         summary = summarise_laid(laid)
         text += (f"\n## The layer laid before the region\n\nParticles whose final x is more than 1 mm short of "

@@ -62,7 +62,7 @@ def test_the_layer_laid_before_the_region_is_counted_from_where_the_roller_passe
     folder = tmp_path / "runs" / "U70_w-15_r0"
     make_run(folder, [[(0, 0.0), (23000, 10.0)]])
     write_dump(folder / "final.dump", [0.0, 0.004, 0.0055, 0.007])
-    laid = travel_time.laid_before_region(folder, 0.006, 0.008)
+    laid = travel_time.laid_before_region(travel_time.read_run(folder), 0.006, 0.008)
     assert laid["laid_before_region"] == 2
     assert laid["particle_steps"] == pytest.approx(2.3e6)
     assert laid["share_after_lag_pct"] == pytest.approx(100 * 6000 / 2.3e6)
