@@ -106,6 +106,11 @@ def test_spread_lays_powder_past_the_heap_and_loses_nothing(smoke):
     assert 0 <= escaped <= 0.05 * smoke["spread"]["atoms"]      # a few (6 of 523 seen), not the layer
     fed = smoke["spread"]["fed_particles"]
     assert len(after) + removed == len(before) + fed and smoke["spread"]["lost"] == 0
+    # removing it keeps every other particle's id (fed particles are told by theirs): each heap
+    # particle left has its settled radius, and the ids run past the count
+    kept = after.merge(before, on="id", suffixes=("", "_settled"))
+    assert len(kept) > 100 and np.array_equal(kept.radius, kept.radius_settled)
+    assert after["id"].max() > len(after) and after["id"].is_unique
     assert after.x.max() < s.travel_end + 2 * max(s.diameters)  # what sat under the roller may slump forward
     # nothing below the substrate: every centre at least half a radius above it
     b = substrate_height_at(root / "meshes" / "substrate.stl")(after.x, after.y)
