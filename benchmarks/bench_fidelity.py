@@ -126,6 +126,8 @@ VARIANTS = {
     "feed0.25": {"LEVEL.feed_every_mm": 0.25},
     "feed0.5": {"LEVEL.feed_every_mm": 0.5},
     "unfed40": {"LEVEL.feed_pile_mg_per_mm": None, "LEVEL.heap_particles": 3640},
+    # the layer laid before the region frozen, and dropped, once the roller is 8 mm past it (#34's speed-up)
+    "freeze8": {"LEVEL.freeze_lag_mm": 8.0},
     # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction
     "dt0.5": {"timestep.rayleigh_fraction": 0.5},
     # the smoke level's pile for the calibrated powder (benchmarks/measured/smoke_pile15.md)

@@ -73,6 +73,8 @@ def test_shipped_config_is_valid_and_has_the_papers_design(base):
     ("substrate.peak_cap_fraction_of_gap", 1.2, "peak_cap_fraction_of_gap"),
     ("fidelity.default.run_out_max_mm", 1.5, "run_out_max_mm (1.5 mm)"),  # before the earliest stop (2 mm)
     ("layer_laid.checks", 0, "layer_laid.checks"),
+    ("fidelity.default.freeze_lag_mm", 3.0, "still in the roller's nip"),  # under 4.06 mm: the roller's nip
+    ("fidelity.default.freeze_lag_mm", -1, "freeze_lag_mm"),
 ])
 def test_bad_value_names_key_and_value(base, dotted, value, words):
     with pytest.raises(ConfigError) as err:

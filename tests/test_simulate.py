@@ -443,3 +443,31 @@ def test_unknown_skip_is_refused(smoke, config, tmp_path):
     with pytest.raises(ValueError, match="unknown skip"):
         spread(config, "smoke", U_MM_S, OMEGA, smoke["root"] / "meshes", smoke["root"] / "settle", tmp_path,
                skips={"stop_at_rest", "no_such_skip"})
+
+
+def test_the_dropped_frozen_layer_is_restored_to_the_final_dump(tmp_path):
+    """A run with freeze_lag_mm writes the frozen layer it drops to laid/; restore_dropped puts it back
+    into final.dump.part (ids, positions and columns as written; empty drops add nothing) and removes
+    a free particle that fell where dropped ones were (overlapping one by more than MAX_OVERLAP)."""
+    from analysis.dem.simulate import LAID_DIR, restore_dropped
+    from analysis.metrics.dump import write_dump
+    box = [[-0.01, 0.02], [0.0, 0.0012], [-0.001, 0.04]]
+    cols = ["id", "type", "x", "y", "z", "radius", "vx", "vy", "vz"]
+    row = lambda i, x, z=1e-4: [i, 1, x, 0.0006, z, 1e-4, 0.0, 0.0, 0.0]  # noqa: E731
+    # 2 rests on 1 (1 um overlap: a resting contact); 4 sits half inside 9 (an intruder)
+    live = [row(7, 0.008), row(2, -0.001, 2.9999e-4), row(4, 0.0001)]
+    write_dump(tmp_path / "final.dump.part", pd.DataFrame(live, columns=cols), box, 900)
+    (tmp_path / LAID_DIR).mkdir()
+    assert restore_dropped(tmp_path) == (0, 0)                  # nothing dropped: the dump as it was
+    assert len(read_dump(tmp_path / "final.dump.part").atoms) == 3
+    write_dump(tmp_path / LAID_DIR / "dropped.300.dump", pd.DataFrame([row(5, -0.003)], columns=cols), box, 300)
+    write_dump(tmp_path / LAID_DIR / "dropped.600.dump", pd.DataFrame([row(1, -0.001), row(9, 0.0)], columns=cols),
+               box, 600)
+    write_dump(tmp_path / LAID_DIR / "dropped.700.dump", pd.DataFrame(columns=cols), box, 700)
+    assert restore_dropped(tmp_path) == (3, 1)
+    final = read_dump(tmp_path / "final.dump.part")
+    assert final.timestep == 900 and list(final.atoms.columns) == cols
+    assert final.atoms["id"].tolist() == [1, 2, 5, 7, 9]
+    assert final.atoms.set_index("id").loc[5, "x"] == -0.003
+    assert not list((tmp_path / LAID_DIR).iterdir())            # restored once, not twice
+    assert restore_dropped(tmp_path) == (0, 0) and len(read_dump(tmp_path / "final.dump.part").atoms) == 5

@@ -4,6 +4,7 @@ physics and the scene (:func:`check_physics`), the bounds of a LIGGGHTS run (:fu
 raises :class:`~analysis.config.errors.ConfigError` naming the key and its value."""
 from __future__ import annotations
 
+from math import sqrt
 from pathlib import Path
 
 import numpy as np
@@ -123,6 +124,15 @@ def check_physics(config: dict, base_dir: Path = Path(".")) -> None:
                       f"{err} mg/mm at material.density_kg_m3 = {config['material']['density_kg_m3']!r}, "
                       f"roller.diameter_mm = {config['roller']['diameter_mm']!r} and "
                       f"roller.gap_um = {config['roller']['gap_um']!r}")
+        lag = lvl.get("freeze_lag_mm")
+        if lag is not None:
+            # the roller is a largest particle above the layer this far behind its axis
+            roller = config["roller"]
+            nip = sqrt(roller["diameter_mm"] * (roller["gap_um"] + config["psd"]["max_diameter_um"]) / 1e3)
+            if lag < nip:
+                refuse(f"fidelity.{name}.freeze_lag_mm", lag,
+                      f"freezes powder still in the roller's nip: it must be at least {nip:.2f} mm (where the roller "
+                      f"is a largest particle, psd.max_diameter_um, above a layer of roller.gap_um)")
         if lvl["sampling_start_mm"] < lvl.get("heap_start_mm", 0) + lvl["heap_length_mm"]:
             refuse(f"fidelity.{name}.sampling_start_mm", lvl["sampling_start_mm"],
                   f"starts inside the heap (heap_length_mm = {lvl['heap_length_mm']})")

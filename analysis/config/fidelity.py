@@ -48,6 +48,8 @@ class Scene:
     feed_pile_mass: float | None  # powder mass [kg] held ahead of the roller over the strip; None: no feed
     feed_length: float      # x-extent [m] of the feed zone ahead of the roller axis (0 without feed)
     feed_every: float       # roller travel [m] between two top-ups of a fed pile
+    freeze_lag: float | None  # the laid layer before the region is frozen this far behind the roller [m]; None: never
+    freeze_x_max: float     # x [m] before which a laid particle may be frozen (FREEZE_MARGIN_MM before the region)
     substrate: dict
     substrate_x: tuple      # (xlo, xhi) the substrate must cover: the whole box [m]
     rough_x: tuple          # (xlo, xhi) where the substrate is rough (around the sampling region) [m]
@@ -57,6 +59,11 @@ class Scene:
     def mean_particle_mass(self) -> float:
         """Number-mean particle mass [kg]."""
         return self.density * number_mean_volume(self.diameters, self.mass_fractions)
+
+
+#: Only the layer more than this far [mm] before the sampling region is frozen (``freeze_lag_mm``): the
+#: region's particles and their neighbours (about 4 largest diameters) stay free.
+FREEZE_MARGIN_MM = 1.0
 
 
 #: Roller travel [mm] between two top-ups of a fed pile, unless the level sets ``feed_every_mm``:
@@ -132,6 +139,8 @@ def scene(config: dict, level: str | None = None) -> Scene:
         runtime_min=lvl.get("runtime_min"), mem_mb_per_rank=lvl.get("mem_mb_per_rank"),
         checkpoints_per_run=lvl.get("checkpoints_per_run", 0),
         feed_pile_mass=feed_pile_mass, feed_length=feed_len, feed_every=lvl.get("feed_every_mm", FEED_EVERY_MM) * mm,
+        freeze_lag=None if lvl.get("freeze_lag_mm") is None else lvl["freeze_lag_mm"] * mm,
+        freeze_x_max=sample_x0 - FREEZE_MARGIN_MM * mm,
         substrate={"sq": sub["sq_um"] * um, "correlation_length": sub["correlation_length_um"] * um,
                    "grid_spacing": sub["grid_spacing_um"] * um, "seed": sub["seed"], "mesh": sub["mesh"],
                    "peak_cap": sub["peak_cap_fraction_of_gap"] * config["roller"]["gap_um"] * um},

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
+from scipy.spatial import cKDTree
 
 from analysis.config.checks import MAX_RUN_STEPS
 from analysis.config.errors import ConfigError
@@ -63,8 +65,8 @@ from analysis.dem.inputs import (
 )
 from analysis.dem.liggghts import LiggghtsError, UnstableRunError, input_path, render, run
 from analysis.io import USER_ERRORS, error_line, write_json
-from analysis.metrics.dump import read_dump
-from analysis.physics import liggghts_seeds, roller_motion
+from analysis.metrics.dump import read_dump, write_dump
+from analysis.physics import MAX_OVERLAP, liggghts_seeds, roller_motion
 
 #: Length [m] over which the rough substrate ramps to flat outside the sampling region.
 ROUGH_TAPER = 0.5e-3
@@ -216,6 +218,39 @@ CHECKPOINT_DIR = "checkpoint"
 
 #: Where ``spread.in.j2`` writes each top-up's landed particles (``feed_landings.csv`` keeps them).
 FEED_DIR = "feed"
+#: Where a run with ``freeze_lag_mm`` writes the frozen layer it drops (restored to the final dump).
+LAID_DIR = "laid"
+#: Frozen particles this many largest diameters behind the freezing cut stay, as the free ones' support;
+#: those farther back leave the run (``freeze_lag_mm``).
+FROZEN_BAND_DIAMETERS = 2
+
+
+def restore_dropped(out: Path) -> tuple[int, int]:
+    """Put the frozen layer that a run with ``freeze_lag_mm`` dropped (``laid/dropped.<step>.dump``, at rest
+    where it was frozen) back into its ``final.dump.part``. A free particle that later landed where dropped
+    ones had been (an intruder: it overlaps one by more than ``MAX_OVERLAP`` of the smaller radius, no
+    resting contact) fell into a hole the frozen layer would have held it above, and is removed.
+    Returns (particles restored, intruders removed)."""
+    parts = sorted((out / LAID_DIR).glob("dropped.*.dump"))
+    dropped = [a for a in (read_dump(p).atoms for p in parts) if len(a)]
+    if not dropped:
+        return 0, 0
+    final = read_dump(out / "final.dump.part")
+    dropped = pd.concat([a[final.atoms.columns] for a in dropped], ignore_index=True)
+    live_xyz, drop_xyz = final.atoms[["x", "y", "z"]].to_numpy(), dropped[["x", "y", "z"]].to_numpy()
+    live_r, drop_r = final.atoms["radius"].to_numpy(), dropped["radius"].to_numpy()
+    pairs = cKDTree(live_xyz).sparse_distance_matrix(cKDTree(drop_xyz), live_r.max() + drop_r.max(),
+                                                      output_type="ndarray")
+    i, j = pairs["i"], pairs["j"]
+    overlap = (live_r[i] + drop_r[j] - pairs["v"]) / np.minimum(live_r[i], drop_r[j])
+    intruder = np.zeros(len(live_xyz), dtype=bool)
+    intruder[i[overlap > MAX_OVERLAP]] = True
+    atoms = pd.concat([final.atoms[~intruder], dropped], ignore_index=True)
+    write_dump(out / "final.dump.part", atoms.sort_values("id", kind="stable"), final.box, final.timestep,
+               periodic=final.periodic)
+    for p in parts:
+        p.unlink()
+    return len(dropped), int(intruder.sum())
 
 
 def _checkpoints(out: Path, fingerprint: str) -> list[tuple[int, Path]]:
@@ -283,6 +318,9 @@ class SpreadPlan:
                 seg["zone"] = feed_zone(s, self.x0 + self.speed * seg["start"] * s.timestep, feed["floor"],
                                         self.gap["axis_z_m"])
                 seg["seed"] = feed["seeds"][seg["start"]]
+            # the laid layer before the region that the roller has left behind (freeze_lag_mm)
+            cut = None if s.freeze_lag is None else min(s.freeze_x_max, self.step_x(seg["end"]) - s.freeze_lag)
+            seg["freeze_x"] = cut if cut is not None and cut > s.box[0] else None
         return render("spread.in.j2", resume=restart and input_path(restart, self.out), resume_step=step,
                       sfx="_resumed" if step else "",
                       roller_x=self.x0 + self.speed * elapsed,
@@ -355,6 +393,8 @@ def plan_spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, mes
                    roller_x0=x0, step_dx=speed * s.timestep,
                    **rest_loop(s, s.rest_time, stop_at_rest="stop_at_rest" in skips),
                    remove_ahead="remove_ahead" in skips,
+                   freeze=None if s.freeze_lag is None else {"band": FROZEN_BAND_DIAMETERS * max(s.diameters)},
+                   laid_dir=LAID_DIR,
                    movie_every=movie_every, movie="movie.dump",
                    squeeze_speed=squeeze_threshold(wall_speed, fall_height), squeeze={"factor": SQUEEZE_FACTOR},
                    dump="final.dump.part", checkpoint_dir=CHECKPOINT_DIR)
@@ -378,10 +418,14 @@ def run_with_resume(plan: SpreadPlan) -> dict:
     limit = blowup_limit(plan.wall_speed, plan.squeeze_out_speed)
     for step, restart in _checkpoints(out, fingerprint) + [(0, None)]:
         if restart is None:  # a fresh start: forget any other input's checkpoints and feed records
-            for folder in (CHECKPOINT_DIR, FEED_DIR):
+            for folder in (CHECKPOINT_DIR, FEED_DIR, LAID_DIR):
                 shutil.rmtree(out / folder, ignore_errors=True)
                 (out / folder).mkdir()
             (out / CHECKPOINT_DIR / "input.sha256").write_text(fingerprint)
+        else:  # the layer dropped after the checkpoint is in its restart file, and is dropped again
+            for later in (out / LAID_DIR).glob("dropped.*.dump"):
+                if int(later.name.split(".")[1]) > step:
+                    later.unlink()
         (out / "spread.in").write_text(fresh if restart is None else plan.render(step, restart))
         try:
             return ran(run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks, abort_speed=limit),
@@ -407,6 +451,7 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
         tail = "\n".join((out / "spread.log.screen").read_text(errors="replace").strip().splitlines()[-8:])
         raise LiggghtsError(f"LIGGGHTS ended (exit 0, no ERROR line) without writing {out / 'final.dump.part'}; "
                             f"last screen lines:\n{tail}")
+    restored, intruders = restore_dropped(out)
     atoms = read_dump(out / "final.dump.part").atoms
     stop = int(log["printed"]["roller_stop_step"])  # where the roller stopped (layer_laid)
     inside = through_roller(atoms, plan.step_x(stop), plan.context["roller_z"], s.roller_radius)
@@ -418,8 +463,9 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
     removed = ahead + int(log["printed"]["escaped_past_roller"]) if "remove_ahead" in skips else 0
     # particles fed before a resumed attempt are in its first thermo row
     fed = int(log["thermo"]["Atoms"].iloc[0]) - plan.settled_particles + int(log["inserted"])
+    expected = plan.settled_particles + fed - removed - intruders
     health.update(through_roller=inside, fed_particles=fed,
-                  **layer_health(atoms, s, plan.meshes / "substrate.stl", plan.settled_particles + fed - removed,
+                  **layer_health(atoms, s, plan.meshes / "substrate.stl", expected,
                                  roller=(plan.step_x(stop), plan.context["roller_z"], s.roller_radius)))
     health.update(heap_supply(ahead, s.heap_particles), removed_ahead_of_roller=removed,
                   mass_ahead_of_roller_kg=float(log["printed"]["mass_ahead_of_roller_kg"]))
@@ -434,8 +480,9 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
     laid_checks = [k for k in log["printed"] if k.startswith("laid_check_")]
     thermo = log["thermo"]
     first, last = int(thermo["Step"].iloc[0]), int(thermo["Step"].iloc[-1])
-    # particle-steps of every particle integrated during the run (the pile included), per CPU second
-    particle_steps = float(np.sum(np.diff(thermo["Step"].to_numpy()) * thermo["Atoms"].to_numpy()[1:]))
+    # particle-steps of every particle integrated during the run (the pile included, the frozen not), per CPU second
+    integrated = thermo["Atoms"].to_numpy() - (thermo["frozen"].to_numpy() if "frozen" in thermo else 0)
+    particle_steps = float(np.sum(np.diff(thermo["Step"].to_numpy()) * integrated[1:]))
     return {"U_mm_s": plan.U_mm_s, "omega_rad_s": plan.omega_rad_s, "wall_s": log["wall_s"], "cpu_s": log["cpu_s"],
             "steps": last, "resumed_from_step": first, "timestep_s": s.timestep, "ranks": s.mpi_ranks,
             "mpi_launcher": log["launcher"], "processors": plan.context["processors"],
@@ -444,6 +491,8 @@ def check_spread(plan: SpreadPlan, log: dict) -> dict:
             "layer_laid_at_stop": bool(plan.checks) and stop < plan.travel_steps,
             "rayleigh_fraction": log["measured_max_rayleigh_fraction"],
             "hertz_fraction": log["measured_max_hertz_fraction"],
+            "frozen_particles": restored + (int(thermo["frozen"].iloc[-1]) if "frozen" in thermo else 0),
+            "freeze_intruders_removed": intruders,
             "particle_steps": particle_steps, "particle_steps_per_s": particle_steps / max(log["cpu_s"], 1e-9),
             **{f"time_{part}_s": seconds for part, seconds in log["timing_s"].items()},
             **{k: v for k, v in plan.gap.items() if k != "circumradius_m"}, **health}
@@ -495,7 +544,7 @@ def spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, meshes: 
         summary = check_spread(plan, run_with_resume(plan))
         summary.update(unstable_retries=1, unstable_error=str(err).splitlines()[0])
     _publish(out, summary, "final.dump")
-    for folder in (CHECKPOINT_DIR, FEED_DIR):
+    for folder in (CHECKPOINT_DIR, FEED_DIR, LAID_DIR):
         shutil.rmtree(out / folder, ignore_errors=True)
     for forced in out.glob("restart_forced_liggghts_*.data"):  # LIGGGHTS' own, written when a kill stopped it
         forced.unlink()

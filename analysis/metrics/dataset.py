@@ -16,9 +16,9 @@ from analysis.physics import MAX_OVERLAP
 #: The keys of a run's ``health.json`` its dataset row carries.
 HEALTH = ["heap_exhausted", "supply_margin", "particles_ahead_of_roller", "fed_particles", "removed_ahead_of_roller",
           "atoms", "lost", "through_substrate", "through_roller", "max_overlap_fraction", "peak_speed_m_s",
-          "kinetic_energy_J", "steps", "wall_s", "particle_steps", "particle_steps_per_s", "rayleigh_fraction",
-          "hertz_fraction", "roller_travel_m", "run_out_m", "layer_laid_at_stop", "cpu_s", "resumed_from_step",
-          "timestep_s", "unstable_retries", "unstable_error",
+          "kinetic_energy_J", "steps", "wall_s", "frozen_particles", "freeze_intruders_removed", "particle_steps",
+          "particle_steps_per_s", "rayleigh_fraction", "hertz_fraction", "roller_travel_m", "run_out_m",
+          "layer_laid_at_stop", "cpu_s", "resumed_from_step", "timestep_s", "unstable_retries", "unstable_error",
           "effective_gap_um", "gap_min_um", "gap_max_um", "substrate_mean_region_m",
           "inrun_max_overlap_um", "inrun_max_overlap_fraction", "inrun_max_wall_overlap_um",
           "inrun_max_wall_overlap_fraction", "squeeze_outs_max", "squeeze_out_samples",
