@@ -1,5 +1,6 @@
 """Real LIGGGHTS runs: the smoke scene settles and spreads, the material
 reaches the engine in the right units, and failures are loud."""
+import copy
 import os
 import signal
 import subprocess
@@ -437,6 +438,35 @@ def test_skips_change_the_cost_not_the_layer(smoke, config):
     first, second = metrics
     assert first["M_s"] == pytest.approx(second["M_s"], abs=SMOKE_SEED_SD["mass_g"] * 1e-3)  # one seed sd, kg
     assert first["thk_avg"] == pytest.approx(second["thk_avg"], rel=0.05)
+
+
+def test_freezing_the_laid_layer_changes_the_cost_not_the_layer(smoke, config):
+    """The same spread with freeze_lag_mm: the layer laid before the region is frozen at rest once the
+    roller is that far past it, dropped from the run and restored to the final dump. Fewer particles
+    are integrated, nothing is lost (an intruder that fell where dropped ones were is counted), no frozen
+    particle is in or within 1 mm of the region, and the region's mass is the unfrozen run's within the
+    smoke level's seed sd (the runs part once a particle is frozen, as any two packings do)."""
+    from analysis.config.fidelity import FREEZE_MARGIN_MM
+    from analysis.metrics.spread_layer import spread_layer_metrics
+    root, s = smoke["root"], smoke["scene"]
+    lag = 4.5  # mm: the smallest whole-half mm past the nip (4.06 mm at the smoke level)
+    with_freeze = copy.deepcopy(config)
+    with_freeze["fidelity"]["smoke"]["freeze_lag_mm"] = lag
+    frozen = spread(with_freeze, "smoke", U_MM_S, OMEGA, root / "meshes", root / "settle", root / "frozen")
+    h, free = frozen, smoke["spread"]
+    assert h["frozen_particles"] > 100 and h["lost"] == 0 and h["through_substrate"] == 0
+    assert h["particle_steps"] < free["particle_steps"]
+    assert h["atoms"] + h["removed_ahead_of_roller"] + h["freeze_intruders_removed"] \
+        == smoke["settled"]["atoms"] + h["fed_particles"]
+    assert not (root / "frozen" / "laid").exists()
+    text = (root / "frozen" / "spread.in").read_text()
+    cuts = [float(line.split("(x<")[1].split(")")[0]) for line in text.splitlines()
+            if line.startswith("variable freezing atom")]
+    assert cuts and max(cuts) <= s.sampling_region[0] - FREEZE_MARGIN_MM * 1e-3 + 1e-12
+    metrics = [spread_layer_metrics(read_dump(root / run / "final.dump"), s.sampling_region, U_MM_S * 1e-3,
+                                    s.density, substrate=root / "meshes" / "substrate.stl",
+                                    n_lines=s.profilometer_lines, seed=0) for run in ("run", "frozen")]
+    assert metrics[0]["M_s"] == pytest.approx(metrics[1]["M_s"], abs=SMOKE_SEED_SD["mass_g"] * 1e-3)
 
 
 def test_unknown_skip_is_refused(smoke, config, tmp_path):
