@@ -49,7 +49,8 @@ ROOT = Path(__file__).resolve().parent.parent
 METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "porosity_pct": "Phi"}
 
 #: The big scene of the stiffness ladder: a 2.5 mm strip (14 mean diameters) with a 40 mg/mm pile,
-#: topped up every 0.5 mm as every run of it was (the default level's own interval may change).
+#: topped up every 0.5 mm as every run of it was (the default level's own interval may change), nothing
+#: frozen (the reference's physics unaltered by the default's freeze_lag_mm).
 #: Particles in a mg of the default powder's dose (the default level's 1,820 for 20 mg/mm over 1.2 mm).
 PARTICLES_PER_MG = 1820 / (20 * 1.2)
 
@@ -63,7 +64,7 @@ def pile(mg_per_mm, strip_width_mm=1.2):
             "LEVEL.heap_particles": int(round(mg_per_mm * strip_width_mm * PARTICLES_PER_MG, -1))}
 
 
-BIG_SCENE = {"LEVEL.strip_width_mm": 2.5, **pile(40, 2.5), "LEVEL.feed_every_mm": 0.5}
+BIG_SCENE = {"LEVEL.strip_width_mm": 2.5, **pile(40, 2.5), "LEVEL.feed_every_mm": 0.5, "LEVEL.freeze_lag_mm": None}
 #: The default's 1.2 mm strip with the reference's 40 mg/mm pile (its particles settled from the start).
 PILE40 = pile(40)
 
@@ -126,8 +127,10 @@ VARIANTS = {
     "feed0.25": {"LEVEL.feed_every_mm": 0.25},
     "feed0.5": {"LEVEL.feed_every_mm": 0.5},
     "unfed40": {"LEVEL.feed_pile_mg_per_mm": None, "LEVEL.heap_particles": 3640},
-    # the layer laid before the region frozen, and dropped, once the roller is 8 mm past it (#34's speed-up)
+    # the layer laid before the region frozen, and dropped, once the roller is 8 mm past it (the default's
+    # freeze_lag_mm), and never (the default before it)
     "freeze8": {"LEVEL.freeze_lag_mm": 8.0},
+    "nofreeze": {"LEVEL.freeze_lag_mm": None},
     # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction
     "dt0.5": {"timestep.rayleigh_fraction": 0.5},
     # the smoke level's pile for the calibrated powder (benchmarks/measured/smoke_pile15.md)
