@@ -501,3 +501,12 @@ def test_the_dropped_frozen_layer_is_restored_to_the_final_dump(tmp_path):
     assert final.atoms.set_index("id").loc[5, "x"] == -0.003
     assert not list((tmp_path / LAID_DIR).iterdir())            # restored once, not twice
     assert restore_dropped(tmp_path) == (0, 0) and len(read_dump(tmp_path / "final.dump.part").atoms) == 5
+
+
+def test_a_resumed_run_forgets_the_layer_dropped_after_its_checkpoint(tmp_path):
+    from analysis.dem.simulate import LAID_DIR, forget_drops_after
+    (tmp_path / LAID_DIR).mkdir()
+    for step in (300, 600, 900):
+        (tmp_path / LAID_DIR / f"dropped.{step}.dump").write_text("")
+    forget_drops_after(tmp_path, 600)
+    assert sorted(p.name for p in (tmp_path / LAID_DIR).iterdir()) == ["dropped.300.dump", "dropped.600.dump"]

@@ -253,6 +253,14 @@ def restore_dropped(out: Path) -> tuple[int, int]:
     return len(dropped), int(intruder.sum())
 
 
+def forget_drops_after(out: Path, step: int) -> None:
+    """Delete the frozen layer a killed attempt dropped after ``step`` (``laid/dropped.<step>.dump``): those
+    particles are in the checkpoint of ``step`` that the run resumes from, and are dropped again."""
+    for later in (out / LAID_DIR).glob("dropped.*.dump"):
+        if int(later.name.split(".")[1]) > step:
+            later.unlink()
+
+
 def _checkpoints(out: Path, fingerprint: str) -> list[tuple[int, Path]]:
     """(step, restart file) of an earlier, killed attempt at this same input, newest first."""
     folder = out / CHECKPOINT_DIR
@@ -422,10 +430,8 @@ def run_with_resume(plan: SpreadPlan) -> dict:
                 shutil.rmtree(out / folder, ignore_errors=True)
                 (out / folder).mkdir()
             (out / CHECKPOINT_DIR / "input.sha256").write_text(fingerprint)
-        else:  # the layer dropped after the checkpoint is in its restart file, and is dropped again
-            for later in (out / LAID_DIR).glob("dropped.*.dump"):
-                if int(later.name.split(".")[1]) > step:
-                    later.unlink()
+        else:
+            forget_drops_after(out, step)
         (out / "spread.in").write_text(fresh if restart is None else plan.render(step, restart))
         try:
             return ran(run(out / "spread.in", out / "spread.log", ranks=s.mpi_ranks, abort_speed=limit),
