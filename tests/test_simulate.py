@@ -478,7 +478,8 @@ def test_unknown_skip_is_refused(smoke, config, tmp_path):
 def test_the_dropped_frozen_layer_is_restored_to_the_final_dump(tmp_path):
     """A run with freeze_lag_mm writes the frozen layer it drops to laid/; restore_dropped puts it back
     into final.dump.part (ids, positions and columns as written; empty drops add nothing) and removes
-    a free particle that fell where dropped ones were (overlapping one by more than MAX_OVERLAP)."""
+    a particle that fell where dropped ones were (overlapping one dropped earlier by more than MAX_OVERLAP):
+    a free one, or one frozen and dropped later itself (a U 70, omega -20 map run: 137 % of a radius)."""
     from analysis.dem.simulate import LAID_DIR, restore_dropped
     from analysis.metrics.dump import write_dump
     box = [[-0.01, 0.02], [0.0, 0.0012], [-0.001, 0.04]]
@@ -494,12 +495,15 @@ def test_the_dropped_frozen_layer_is_restored_to_the_final_dump(tmp_path):
     write_dump(tmp_path / LAID_DIR / "dropped.600.dump", pd.DataFrame([row(1, -0.001), row(9, 0.0)], columns=cols),
                box, 600)
     write_dump(tmp_path / LAID_DIR / "dropped.700.dump", pd.DataFrame(columns=cols), box, 700)
-    assert restore_dropped(tmp_path) == (3, 1)
+    # 11 landed half inside 5 after 5 was dropped, came to rest and was dropped at step 1000 (after 300 in
+    # steps, before it by name): 11 is the intruder, not 5
+    write_dump(tmp_path / LAID_DIR / "dropped.1000.dump", pd.DataFrame([row(11, -0.00295)], columns=cols), box, 1000)
+    assert restore_dropped(tmp_path) == (3, 2)
     final = read_dump(tmp_path / "final.dump.part")
     assert final.timestep == 900 and list(final.atoms.columns) == cols
     assert final.atoms["id"].tolist() == [1, 2, 5, 7, 9]
     assert final.atoms.set_index("id").loc[5, "x"] == -0.003
-    assert not list((tmp_path / LAID_DIR).iterdir())            # restored once, not twice
+    assert len(list((tmp_path / LAID_DIR).iterdir())) == 4      # kept for a resume until the run is published
     assert restore_dropped(tmp_path) == (0, 0) and len(read_dump(tmp_path / "final.dump.part").atoms) == 5
 
 

@@ -227,30 +227,31 @@ FROZEN_BAND_DIAMETERS = 2
 
 def restore_dropped(out: Path) -> tuple[int, int]:
     """Put the frozen layer that a run with ``freeze_lag_mm`` dropped (``laid/dropped.<step>.dump``, at rest
-    where it was frozen) back into its ``final.dump.part``. A free particle that later landed where dropped
-    ones had been (an intruder: it overlaps one by more than ``MAX_OVERLAP`` of the smaller radius, no
-    resting contact) fell into a hole the frozen layer would have held it above, and is removed.
+    where it was frozen) back into its ``final.dump.part``. A particle that landed where dropped ones had been
+    (an intruder: it overlaps one dropped earlier by more than ``MAX_OVERLAP`` of the smaller radius, no
+    resting contact) fell into a hole the frozen layer would have held it above, and is removed: a free
+    particle of the final state, or one frozen and dropped itself later. The drops stay in ``laid/`` until the
+    run is published, so that a run resumed from a checkpoint after a failed check restores them again; a
+    dump that already holds them is left as it is.
     Returns (particles restored, intruders removed)."""
-    parts = sorted((out / LAID_DIR).glob("dropped.*.dump"))
+    parts = sorted((out / LAID_DIR).glob("dropped.*.dump"), key=lambda p: int(p.name.split(".")[1]))
     dropped = [a for a in (read_dump(p).atoms for p in parts) if len(a)]
-    if not dropped:
-        return 0, 0
     final = read_dump(out / "final.dump.part")
-    dropped = pd.concat([a[final.atoms.columns] for a in dropped], ignore_index=True)
-    live_xyz, drop_xyz = final.atoms[["x", "y", "z"]].to_numpy(), dropped[["x", "y", "z"]].to_numpy()
-    live_r, drop_r = final.atoms["radius"].to_numpy(), dropped["radius"].to_numpy()
-    pairs = cKDTree(live_xyz).sparse_distance_matrix(cKDTree(drop_xyz), live_r.max() + drop_r.max(),
-                                                      output_type="ndarray")
-    i, j = pairs["i"], pairs["j"]
-    overlap = (live_r[i] + drop_r[j] - pairs["v"]) / np.minimum(live_r[i], drop_r[j])
-    intruder = np.zeros(len(live_xyz), dtype=bool)
-    intruder[i[overlap > MAX_OVERLAP]] = True
-    atoms = pd.concat([final.atoms[~intruder], dropped], ignore_index=True)
-    write_dump(out / "final.dump.part", atoms.sort_values("id", kind="stable"), final.box, final.timestep,
-               periodic=final.periodic)
-    for p in parts:
-        p.unlink()
-    return len(dropped), int(intruder.sum())
+    if not dropped or np.isin(dropped[0]["id"], final.atoms["id"]).any():
+        return 0, 0
+    frames = [a[final.atoms.columns] for a in dropped] + [final.atoms]
+    atoms = pd.concat(frames, ignore_index=True)
+    order = np.repeat(np.arange(len(frames)), [len(a) for a in frames])  # when each left the run; the final last
+    xyz, radius = atoms[["x", "y", "z"]].to_numpy(), atoms["radius"].to_numpy()
+    pairs = cKDTree(xyz).query_pairs(2 * radius.max(), output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    overlap = (radius[i] + radius[j] - np.linalg.norm(xyz[i] - xyz[j], axis=1)) / np.minimum(radius[i], radius[j])
+    hit = (overlap > MAX_OVERLAP) & (order[i] != order[j])
+    intruder = np.zeros(len(atoms), dtype=bool)
+    intruder[np.where(order[i] > order[j], i, j)[hit]] = True
+    write_dump(out / "final.dump.part", atoms[~intruder].sort_values("id", kind="stable"), final.box,
+               final.timestep, periodic=final.periodic)
+    return int(np.sum(~intruder[order < len(dropped)])), int(intruder.sum())
 
 
 def forget_drops_after(out: Path, step: int) -> None:
