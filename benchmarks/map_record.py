@@ -58,6 +58,11 @@ def soundness(df: pd.DataFrame) -> str:
            f"through the substrate: {int(df['through_substrate'].sum())}",
            f"- fastest particle at the end: {df['peak_speed_m_s'].max():.2f} m/s; "
            f"Rayleigh fraction at most {df['rayleigh_fraction'].max():.3f}"]
+    if "frozen_particles" in df:
+        out.append(f"- the layer laid before the region, frozen and dropped from the run: "
+                   f"{df['frozen_particles'].min():.0f}-{df['frozen_particles'].max():.0f} particles a run; intruders "
+                   f"removed (landed where dropped ones were): {int(df['freeze_intruders_removed'].sum())} in all, "
+                   f"at most {int(df['freeze_intruders_removed'].max())} in a run")
     out.append(f"- largest overlap during a run: particle-particle {df['inrun_max_overlap_um'].max():.0f} um "
                f"({df['inrun_max_overlap_fraction'].max():.2f} of the smaller radius), against a wall "
                f"{df['inrun_max_wall_overlap_um'].max():.0f} um ({df['inrun_max_wall_overlap_fraction'].max():.2f}); "

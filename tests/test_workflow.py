@@ -82,6 +82,9 @@ def test_map_record_benchmark_reads_the_finished_map(workflow, tmp_path):
     assert f"LIGGGHTS' CPU: {data.cpu_s.sum():.0f} s in all" in text
     assert f"smallest `supply_margin` {data.supply_margin.min():.2f}" in text
     assert f"the pile at its lightest top-up {data.feed_pile_min_fraction.min():.2f} of its set mass" in text
+    assert (f"frozen and dropped from the run: {data.frozen_particles.min():.0f}-{data.frozen_particles.max():.0f} "
+            f"particles a run; intruders removed (landed where dropped ones were): "
+            f"{int(data.freeze_intruders_removed.sum())} in all") in text
     assert f"| M_s | {scores['test']['mass_g']['R']:.3f} |" in text
     assert f"Chosen model: **{scores['model']['name']}**" in text
     spread_jobs = int(re.search(r"^\| spread \| (\d+) \|", text, re.MULTILINE).group(1))
