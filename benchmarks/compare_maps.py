@@ -10,7 +10,8 @@ For each of the four metrics and each group of points (all, omega < 0, omega = 0
 mean of each map over the points both ran, the mean relative change ``100 (new - old) / old`` per
 point, and the mean absolute change in the pooled seed sd of ``--noise`` (optional: a noise-floor
 CSV with ``<metric>_sd`` columns per point, or a ``bench_fidelity`` run table and the variant whose
-seeds give it; its sampling region should be the maps'). With ``--old-variant``, OLD is such a run table
+seeds give it; its sampling region should be the maps'), and the paired t of the change (its mean over
+its standard error across the points: whether the points share it). With ``--old-variant``, OLD is such a run table
 and that variant's seed means per point stand for the old map (only the points it ran are compared);
 with ``--old-means``, OLD is an earlier comparison's table and its group means stand for the old map.
 Writes ``benchmarks/measured/<name>.csv`` and ``.md``.
@@ -87,8 +88,9 @@ def compare_with_means(old_means: pd.DataFrame, label: str, new: pd.DataFrame, s
 
 
 def compare(old: pd.DataFrame, new: pd.DataFrame, sds: dict | None = None) -> pd.DataFrame:
-    """One row per (group of points, metric): both maps' means, the mean relative change [%] and,
-    with ``sds`` (metric -> pooled seed sd), the mean absolute change in those sds."""
+    """One row per (group of points, metric): both maps' means, the mean relative change [%],
+    with ``sds`` (metric -> pooled seed sd) the mean absolute change in those sds, and the paired t
+    of the change (:func:`paired_t`)."""
     a, b = point_means(old), point_means(new)
     shared = a.index.intersection(b.index)
     if shared.empty:
@@ -106,8 +108,18 @@ def compare(old: pd.DataFrame, new: pd.DataFrame, sds: dict | None = None) -> pd
                    "change_pct": 100 * np.mean((y - x) / x)}
             if sds and k in sds:
                 row["abs_change_in_sds"] = np.mean(np.abs(y - x)) / sds[k]
+            row["paired_t"] = paired_t(y - x, scale=np.abs(x).mean())
             rows.append(row)
     return pd.DataFrame(rows)
+
+
+def paired_t(diff: np.ndarray, scale: float = 1.0) -> float:
+    """The mean of the points' differences over its standard error (a paired t statistic, n - 1 degrees
+    of freedom): a change the points share stands out of the scatter a chaotic run adds to each point.
+    NaN with fewer than 2 points or no scatter beyond 1e-4 of ``scale`` (the values' size): runs identical
+    but for the precision their dumps were printed with."""
+    scatter = np.std(diff, ddof=1) if len(diff) > 1 else 0.0
+    return float(np.mean(diff) / (scatter / np.sqrt(len(diff)))) if scatter > 1e-4 * scale else float("nan")
 
 
 def main(argv=None) -> int:

@@ -275,6 +275,15 @@ def test_two_maps_are_compared_per_group_of_points_in_the_seed_sd_given(tmp_path
         compare_maps.main([str(tmp_path / "old.csv"), str(tmp_path / "none.csv")])
 
 
+def test_the_paired_t_of_a_maps_change_weighs_the_shared_shift_against_the_points_scatter():
+    """Differences 0.1, 0.3, -0.1, 0.1: mean 0.1, sd 0.163 over 4 points, t = 0.1 / (0.163 / 2) = 1.22;
+    a uniform shift has no scatter to weigh (NaN), one point neither, nor identical runs printed at another
+    precision."""
+    assert compare_maps.paired_t(np.array([0.1, 0.3, -0.1, 0.1])) == pytest.approx(0.1 / (np.sqrt(0.08 / 3) / 2))
+    assert np.isnan(compare_maps.paired_t(np.array([0.2, 0.2]))) and np.isnan(compare_maps.paired_t(np.array([1.0])))
+    assert np.isnan(compare_maps.paired_t(np.array([1e-4, -5e-4, 0.0]), scale=80.0))
+
+
 def test_a_map_is_compared_with_a_run_tables_seed_means_at_the_points_it_ran(tmp_path):
     """--old-variant: the old map is one variant's seed means (two points of a bench_fidelity table);
     the new map's other points are left out, and a table without that variant is refused by name."""
