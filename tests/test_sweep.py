@@ -110,7 +110,6 @@ def test_explicit_points_over_all_axes(base):
     ({"material.poisson_ratio": [0.3, 0.6]}, "'sweep.material.poisson_ratio' = 0.6"),
     ({"fidelity.default.heap_particles": [300, 100.5]}, "'sweep.fidelity.default.heap_particles' = 100.5"),
     ({"roller.gap_um": [300, 80]}, "'sweep.roller.gap_um' = 80"),
-    ({"roller.gap_um": [300, 2000]}, "freezes powder still in the roller's nip"),   # the default's 8 mm < 8.4
     ({"surrogate.alpha": [0.1]}, "'sweep.surrogate.alpha'"),
     ({"substrate.seed": [1, 2]}, "sweep.replicates varies the seeds"),
     ({"fidelity.smoke.heap_particles": [100]}, "names fidelity level 'smoke', but level is 'default'"),
@@ -133,10 +132,16 @@ def test_a_bad_swept_value_names_its_axis_and_value(base, sweep, words):
 
 
 def test_a_swept_gap_that_puts_the_roller_outside_the_box_is_refused(base):
-    """(Without the default's freeze_lag_mm, which refuses such a gap first: its nip is longer than 8 mm.)"""
     config = with_sweep(base, **{"roller.gap_um": [300, 9000]})
-    config["fidelity"]["default"]["freeze_lag_mm"] = None
     with pytest.raises(ConfigError, match="outside the simulation box"):
+        load_config(config, base_dir=ROOT)
+
+
+def test_a_swept_gap_whose_nip_reaches_the_frozen_layer_is_refused(base):
+    """With freeze_lag_mm 8, a 2 mm gap's nip (8.4 mm) would freeze powder the roller still presses."""
+    config = with_sweep(base, **{"roller.gap_um": [300, 2000]})
+    config["fidelity"]["default"]["freeze_lag_mm"] = 8
+    with pytest.raises(ConfigError, match="freezes powder still in the roller's nip"):
         load_config(config, base_dir=ROOT)
 
 
