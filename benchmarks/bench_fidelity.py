@@ -50,7 +50,7 @@ METRICS = {"mass_g": "M_s", "throughput_mm2_s": "Q_s", "roughness_um": "R_q", "p
 
 #: The big scene of the stiffness ladder: a 2.5 mm strip (14 mean diameters) with a 40 mg/mm pile,
 #: topped up every 0.5 mm as every run of it was (the default level's own interval may change), nothing
-#: frozen (the reference's physics unaltered by the default's freeze_lag_mm).
+#: frozen whatever the level sets (freeze_lag_mm).
 #: Particles in a mg of the default powder's dose (the default level's 1,820 for 20 mg/mm over 1.2 mm).
 PARTICLES_PER_MG = 1820 / (20 * 1.2)
 
@@ -127,8 +127,8 @@ VARIANTS = {
     "feed0.25": {"LEVEL.feed_every_mm": 0.25},
     "feed0.5": {"LEVEL.feed_every_mm": 0.5},
     "unfed40": {"LEVEL.feed_pile_mg_per_mm": None, "LEVEL.heap_particles": 3640},
-    # the layer laid before the region frozen, and dropped, once the roller is 8 mm past it (the default's
-    # freeze_lag_mm), and never (the default before it)
+    # the layer laid before the region frozen, and dropped, once the roller is 8 mm past it (freeze_lag_mm;
+    # the default level set it from fffa867 to 592349f), and never
     "freeze8": {"LEVEL.freeze_lag_mm": 8.0},
     "nofreeze": {"LEVEL.freeze_lag_mm": None},
     # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction

@@ -20,19 +20,26 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` importable
 
 from benchmarks.machine import commit, machine  # noqa: E402
+from benchmarks.travel_time import GROUPS  # noqa: E402
 
-GROUPS = {"forward rolling (omega < 0)": lambda w: w < 0, "still (omega = 0)": lambda w: w == 0,
-          "counter-rotating (omega > 0)": lambda w: w > 0, "all runs": lambda w: w == w}
 PARTS = ("pair", "neigh", "comm", "other")
 ROUND = {"cpu_s": 0, "cpu_s_per_run": 0, "particle_steps_G": 2, "M_particle_steps_per_cpu_s": 2,
          "frozen_particles_mean": 0, **{f"{p}_pct": 1 for p in PARTS + ("output",)}}
 NEEDED = ["U_mm_s", "omega_rad_s", "cpu_s", "particle_steps", "time_loop_s"] + [f"time_{p}_s" for p in PARTS]
+
+
+def groups(omega: pd.Series):
+    """(name, mask) of each group of runs by the sign of omega (travel_time's groups), then all runs."""
+    sign = np.sign(omega.to_numpy())
+    yield from ((name, sign == s) for s, name in GROUPS.items())
+    yield "all runs", np.ones(len(sign), dtype=bool)
 
 
 def read_map(path: Path) -> pd.DataFrame:
@@ -51,8 +58,8 @@ def read_map(path: Path) -> pd.DataFrame:
 def profile(data: pd.DataFrame) -> pd.DataFrame:
     """One row per group of runs: CPU [s], particle-steps, their rate [M per CPU s], loop shares [%]."""
     rows = []
-    for group, keep in GROUPS.items():
-        runs = data[keep(data["omega_rad_s"])]
+    for group, keep in groups(data["omega_rad_s"]):
+        runs = data[keep]
         if runs.empty:
             continue
         loop = runs["time_loop_s"].sum()
@@ -72,8 +79,8 @@ def ratios(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
     both = pd.merge(*(m.groupby(keys)[["cpu_s", "particle_steps"]].mean().reset_index() for m in (before, after)),
                     on=keys, suffixes=("_before", "_after"))
     rows = []
-    for group, keep in GROUPS.items():
-        runs = both[keep(both["omega_rad_s"])]
+    for group, keep in groups(both["omega_rad_s"]):
+        runs = both[keep]
         if runs.empty:
             continue
         rows.append({"runs": group, "points": len(runs),

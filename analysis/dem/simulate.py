@@ -234,7 +234,7 @@ def restore_dropped(out: Path) -> tuple[int, int]:
     run is published, so that a run resumed from a checkpoint after a failed check restores them again; a
     dump that already holds them is left as it is.
     Returns (particles restored, intruders removed)."""
-    parts = sorted((out / LAID_DIR).glob("dropped.*.dump"), key=lambda p: int(p.name.split(".")[1]))
+    parts = sorted((out / LAID_DIR).glob("dropped.*.dump"), key=_drop_step)
     dropped = [a for a in (read_dump(p).atoms for p in parts) if len(a)]
     final = read_dump(out / "final.dump.part")
     if not dropped or np.isin(dropped[0]["id"], final.atoms["id"]).any():
@@ -258,8 +258,13 @@ def forget_drops_after(out: Path, step: int) -> None:
     """Delete the frozen layer a killed attempt dropped after ``step`` (``laid/dropped.<step>.dump``): those
     particles are in the checkpoint of ``step`` that the run resumes from, and are dropped again."""
     for later in (out / LAID_DIR).glob("dropped.*.dump"):
-        if int(later.name.split(".")[1]) > step:
+        if _drop_step(later) > step:
             later.unlink()
+
+
+def _drop_step(path: Path) -> int:
+    """The step at which ``laid/dropped.<step>.dump`` was written."""
+    return int(path.name.split(".")[1])
 
 
 def _checkpoints(out: Path, fingerprint: str) -> list[tuple[int, Path]]:
