@@ -459,9 +459,8 @@ def test_freezing_the_laid_layer_changes_the_cost_not_the_layer(smoke, config):
     assert h["atoms"] + h["removed_ahead_of_roller"] + h["freeze_intruders_removed"] \
         == smoke["settled"]["atoms"] + h["fed_particles"]
     assert not (root / "frozen" / "laid").exists()
-    text = (root / "frozen" / "spread.in").read_text()
-    cuts = [float(line.split("(x<")[1].split(")")[0]) for line in text.splitlines()
-            if line.startswith("variable freezing atom")]
+    log = (root / "frozen" / "spread.log").read_text()
+    cuts = [float(line.split()[2]) for line in log.splitlines() if line.startswith("spreadmap freeze_cut_")]
     assert cuts and max(cuts) <= s.sampling_region[0] - FREEZE_MARGIN_MM * 1e-3 + 1e-12
     metrics = [spread_layer_metrics(read_dump(root / run / "final.dump"), s.sampling_region, U_MM_S * 1e-3,
                                     s.density, substrate=root / "meshes" / "substrate.stl",
