@@ -131,6 +131,8 @@ VARIANTS = {
     # the default level set it from fffa867 to 592349f), and never
     "freeze8": {"LEVEL.freeze_lag_mm": 8.0},
     "nofreeze": {"LEVEL.freeze_lag_mm": None},
+    # both stopped 12 mm past the region: the freeze judged free of where the stop rule stops the roller
+    "freeze8+runout12": {"LEVEL.freeze_lag_mm": 8.0, "LEVEL.run_out_mm": 12.0, "LEVEL.run_out_max_mm": 12.0},
     # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction
     "dt0.5": {"timestep.rayleigh_fraction": 0.5},
     # the smoke level's pile for the calibrated powder (benchmarks/measured/smoke_pile15.md)
