@@ -333,6 +333,18 @@ def variant_scenes(*names):
                  for name in names)
 
 
+def test_every_variant_is_a_valid_scene_and_the_stop_variants_set_what_they_say():
+    """Each of bench_fidelity's variants passes the config's checks; `fwd12` stops forward rolling 12 mm past
+    the region and nothing else, `freeze8+fwd12` adds the 8 mm freeze."""
+    names = list(bench_fidelity.VARIANTS)
+    scenes = dict(zip(names, variant_scenes(*names)))
+    default, fwd, both = scenes["default"], scenes["fwd12"], scenes["freeze8+fwd12"]
+    assert default.forward_travel_end is None
+    assert fwd.forward_travel_end == pytest.approx(fwd.sampling_region[1] + 12e-3)
+    assert fwd.travel_end == default.travel_end and fwd.freeze_lag == default.freeze_lag
+    assert both.forward_travel_end == fwd.forward_travel_end and both.freeze_lag == pytest.approx(8e-3)
+
+
 def test_the_reference_level_is_the_scene_the_benchmarks_judge_the_default_against():
     """config.yaml's `reference` level and bench_fidelity's reference variant (the default level with
     100 MPa, a 2.5 mm strip and a 40 mg/mm pile) are one scene: every physical field alike."""
