@@ -18,7 +18,7 @@ class Scene:
     sampling_region: tuple  # (xmin, xmax, ymin, ymax) [m]
     travel_end: float       # x of the roller axis where it stops, or (with ``run_out_max_mm``) may first stop [m]
     travel_end_max: float   # x of the roller axis where it stops at the latest [m] (= travel_end: a fixed stop)
-    forward_travel_end: float | None  # under forward rolling (omega < 0) the roller stops here, unchecked [m]; None: as above
+    forward_travel_end: float | None  # omega < 0 stops here, unchecked [m] (forward_run_out_mm); None: as above
     laid_speed: float       # RMS speed [m/s] below which the sampling region's layer is laid (layer_laid)
     laid_checks: int        # checks in a row at which it must be so before the roller may stop
     laid_check_every: float  # roller travel [m] between two checks
