@@ -133,9 +133,6 @@ VARIANTS = {
     "nofreeze": {"LEVEL.freeze_lag_mm": None},
     # both stopped 12 mm past the region: the freeze judged free of where the stop rule stops the roller
     "freeze8+runout12": {"LEVEL.freeze_lag_mm": 8.0, "LEVEL.run_out_mm": 12.0, "LEVEL.run_out_max_mm": 12.0},
-    # forward rolling stopped 12 mm past the region, unchecked (forward_run_out_mm); omega >= 0 as configured
-    "fwd12": {"LEVEL.forward_run_out_mm": 12.0},
-    "freeze8+fwd12": {"LEVEL.freeze_lag_mm": 8.0, "LEVEL.forward_run_out_mm": 12.0},
     # a cheaper step, now that a blown-up spread is re-run at timestep.unstable_retry_fraction
     "dt0.5": {"timestep.rayleigh_fraction": 0.5},
     # the smoke level's pile for the calibrated powder (benchmarks/measured/smoke_pile15.md)

@@ -333,16 +333,15 @@ def variant_scenes(*names):
                  for name in names)
 
 
-def test_every_variant_is_a_valid_scene_and_the_stop_variants_set_what_they_say():
-    """Each of bench_fidelity's variants passes the config's checks; `fwd12` stops forward rolling 12 mm past
-    the region and nothing else, `freeze8+fwd12` adds the 8 mm freeze."""
+def test_every_variant_is_a_valid_scene_and_the_fixed_stop_freeze_sets_what_it_says():
+    """Each of bench_fidelity's variants passes the config's checks; `freeze8+runout12` is `runout12` with
+    the 8 mm freeze and nothing else."""
     names = list(bench_fidelity.VARIANTS)
     scenes = dict(zip(names, variant_scenes(*names)))
-    default, fwd, both = scenes["default"], scenes["fwd12"], scenes["freeze8+fwd12"]
-    assert default.forward_travel_end is None
-    assert fwd.forward_travel_end == pytest.approx(fwd.sampling_region[1] + 12e-3)
-    assert fwd.travel_end == default.travel_end and fwd.freeze_lag == default.freeze_lag
-    assert both.forward_travel_end == fwd.forward_travel_end and both.freeze_lag == pytest.approx(8e-3)
+    fixed, both = scenes["runout12"], scenes["freeze8+runout12"]
+    assert fixed.travel_end == fixed.travel_end_max == pytest.approx(fixed.sampling_region[1] + 12e-3)
+    assert both.freeze_lag == pytest.approx(8e-3) and fixed.freeze_lag is None
+    assert (both.travel_end, both.travel_end_max, both.box) == (fixed.travel_end, fixed.travel_end_max, fixed.box)
 
 
 def test_the_reference_level_is_the_scene_the_benchmarks_judge_the_default_against():

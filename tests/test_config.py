@@ -75,8 +75,6 @@ def test_shipped_config_is_valid_and_has_the_papers_design(base):
     ("layer_laid.checks", 0, "layer_laid.checks"),
     ("fidelity.default.freeze_lag_mm", 3.0, "still in the roller's nip"),  # under 4.06 mm: the roller's nip
     ("fidelity.default.freeze_lag_mm", -1, "freeze_lag_mm"),
-    ("fidelity.default.forward_run_out_mm", 14.0, "outside run_out_mm (2 mm) to run_out_max_mm (12 mm)"),
-    ("fidelity.default.forward_run_out_mm", 1.0, "forward_run_out_mm"),
 ])
 def test_bad_value_names_key_and_value(base, dotted, value, words):
     with pytest.raises(ConfigError) as err:

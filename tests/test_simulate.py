@@ -24,7 +24,6 @@ from analysis.dem.inputs import (
     checkpoint_plan,
     feed_plan,
     processors_grid,
-    stop_checks,
     travel_segments,
 )
 from analysis.dem.liggghts import LiggghtsError, UnstableRunError, check_seeds, input_path, read_log, run
@@ -351,23 +350,6 @@ def test_checkpoint_plan_spaces_checkpoints_and_skips_those_passed():
     assert checkpoint_plan(100, 3) == [(25, None), (50, 25), (75, 50)]
     assert checkpoint_plan(100, 3, resume_step=50) == [(75, 50)]
     assert checkpoint_plan(100, 3, resume_step=75) == []
-
-
-def test_a_forward_rolling_roller_travels_to_forward_run_out_mm_unchecked(config):
-    """With forward_run_out_mm, omega < 0 stops there with no layer_laid checks; omega >= 0 and a level
-    without it keep the checks from run_out_mm to run_out_max_mm."""
-    level = copy.deepcopy(config)
-    level["fidelity"]["default"]["forward_run_out_mm"] = 12.0
-    s, plain = scene(level, "default"), scene(config, "default")
-    x0, speed = -9e-3, 70e-3
-    end = s.sampling_region[1] + 12e-3
-    fixed, checks, last = stop_checks(s, x0, speed, omega=-5.0)
-    assert checks == [] and fixed == last and (last - 1) * speed * s.timestep < end - x0 <= last * speed * s.timestep
-    for scene_, omega in ((s, 0.0), (s, 10.0), (plain, -5.0)):
-        fixed, checks, last = stop_checks(scene_, x0, speed, omega)
-        assert fixed * speed * s.timestep == pytest.approx(s.travel_end - x0, abs=speed * s.timestep)
-        assert checks and checks[0] == fixed and last * speed * s.timestep == pytest.approx(
-            s.travel_end_max - x0, abs=speed * s.timestep)
 
 
 def test_travel_is_cut_at_checkpoints_and_feeds_and_resumes_after_them():

@@ -18,7 +18,6 @@ class Scene:
     sampling_region: tuple  # (xmin, xmax, ymin, ymax) [m]
     travel_end: float       # x of the roller axis where it stops, or (with ``run_out_max_mm``) may first stop [m]
     travel_end_max: float   # x of the roller axis where it stops at the latest [m] (= travel_end: a fixed stop)
-    forward_travel_end: float | None  # omega < 0 stops here, unchecked [m] (forward_run_out_mm); None: as above
     laid_speed: float       # RMS speed [m/s] below which the sampling region's layer is laid (layer_laid)
     laid_checks: int        # checks in a row at which it must be so before the roller may stop
     laid_check_every: float  # roller travel [m] between two checks
@@ -114,11 +113,6 @@ def scene(config: dict, level: str | None = None) -> Scene:
     if run_out_max < run_out:
         refuse(f"fidelity.{level}.run_out_mm", lvl["run_out_mm"],
                f"the roller may first stop there, past the latest stop, run_out_max_mm ({lvl['run_out_max_mm']:g} mm)")
-    forward = lvl.get("forward_run_out_mm")
-    if forward is not None and not lvl["run_out_mm"] <= forward <= lvl.get("run_out_max_mm", lvl["run_out_mm"]):
-        refuse(f"fidelity.{level}.forward_run_out_mm", forward,
-               f"a forward-rolling roller stops there, outside run_out_mm ({lvl['run_out_mm']:g} mm) to "
-               f"run_out_max_mm ({lvl.get('run_out_max_mm', lvl['run_out_mm']):g} mm), which the box is made for")
     laid = config["layer_laid"]
     box = (heap_start - (2 * heap_height + sqrt(2 * radius * heap_height) + radius + 2 * mm),
            sample_x1 + run_out_max + max(radius, feed_len) + 2 * mm,
@@ -129,7 +123,6 @@ def scene(config: dict, level: str | None = None) -> Scene:
         heap=(heap_start, heap_start + heap_length, gap, gap + heap_height), heap_particles=lvl["heap_particles"],
         sampling_region=(sample_x0, sample_x1, y0, y0 + sample_w),
         travel_end=sample_x1 + run_out, travel_end_max=sample_x1 + run_out_max,
-        forward_travel_end=None if forward is None else sample_x1 + forward * mm,
         laid_speed=laid["rms_speed_mm_s"] * mm, laid_checks=laid["checks"],
         laid_check_every=laid["check_every_mm"] * mm,
         roller_radius=radius, roller_gap=gap, roller_facets=roller["facets_around"],

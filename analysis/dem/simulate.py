@@ -373,7 +373,7 @@ def plan_spread(config: dict, level: str, U_mm_s: float, omega_rad_s: float, mes
     x0 = geometry.roller_start(atoms0, s, axis_z=gap["axis_z_m"])
     if x0 - s.roller_radius <= s.box[0]:
         raise LiggghtsError(f"roller start x = {x0:.4g} m puts the roller outside the box (x >= {s.box[0]:.4g} m)")
-    fixed_steps, checks, travel_steps = stop_checks(s, x0, speed, omega_rad_s)
+    fixed_steps, checks, travel_steps = stop_checks(s, x0, speed)
     if not 1 <= travel_steps <= MAX_RUN_STEPS:
         raise ConfigError(f"spreader speed U = {U_mm_s:g} mm/s: the travel takes {travel_steps:.3g} time steps of "
                           f"{s.timestep:.3g} s; a LIGGGHTS run takes 1 to {MAX_RUN_STEPS}")
