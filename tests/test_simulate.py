@@ -462,6 +462,12 @@ def test_freezing_the_laid_layer_changes_the_cost_not_the_layer(smoke, config):
     log = (root / "frozen" / "spread.log").read_text()
     cuts = [float(line.split()[2]) for line in log.splitlines() if line.startswith("spreadmap freeze_cut_")]
     assert cuts and max(cuts) <= s.sampling_region[0] - FREEZE_MARGIN_MM * 1e-3 + 1e-12
+    # each segment's cut is the planned one, or behind it where powder in the roller's wake still moved
+    planned = [float(line.split("(v_wake_rear<")[1].split(")")[0])
+               for line in (root / "frozen" / "spread.in").read_text().splitlines()
+               if line.startswith("variable freeze_cut equal")][:len(cuts)]
+    behind = np.array(planned) - np.array(cuts)
+    assert behind.min() > -1e-12 and (behind < 1e-12).any() and (behind > 1e-5).any()
     metrics = [spread_layer_metrics(read_dump(root / run / "final.dump"), s.sampling_region, U_MM_S * 1e-3,
                                     s.density, substrate=root / "meshes" / "substrate.stl",
                                     n_lines=s.profilometer_lines, seed=0) for run in ("run", "frozen")]
