@@ -54,6 +54,7 @@ sys.path.insert(0, str(ROOT))  # run as a script: `benchmarks` (and this checkou
 
 from analysis.config.fidelity import scene  # noqa: E402
 from analysis.config.load import load_config  # noqa: E402
+from analysis.dem.geometry import load_stl, substrate_rms  # noqa: E402
 from analysis.dem.health import fed_share  # noqa: E402
 from analysis.metrics.dump import read_dump  # noqa: E402
 from analysis.metrics.noise_floor import POOLED, noise_floor  # noqa: E402
@@ -86,10 +87,13 @@ def layers(replicates: Path | None, map_runs: Path | None, variant: str, against
 
 
 def measure(task) -> list[dict]:
-    """One layer's four metrics over every region (M_s scaled to ``area_ref`` [m^2]) and the share of
-    its particles there that the feed added (ids above the settled heap's count)."""
+    """One layer's four metrics over every region (M_s scaled to ``area_ref`` [m^2]), the share of
+    its particles there that the feed added (ids above the settled heap's count) and the substrate's mean
+    height under the region above the gap's datum (its mean plane under the run's own sampling region)."""
     layer, regions, area_ref, density, n_lines, seed = task
     frame = read_dump(layer["dump"], required=("id", "x", "y", "z", "radius"))
+    substrate = load_stl(layer["substrate"])
+    datum = substrate_rms(substrate, layer["own_x"])[0]
     rows = []
     for label, region in regions[layer["source"]]:
         try:
@@ -99,12 +103,13 @@ def measure(task) -> list[dict]:
         except ValueError:  # the region reaches past this layer's box (a shorter travel): not measured
             report = dict.fromkeys(METRICS, np.nan)
         area = (region[1] - region[0]) * (region[3] - region[2])
-        row = {k: v for k, v in layer.items() if k not in ("dump", "substrate", "heap_particles")}
+        row = {k: v for k, v in layer.items() if k not in ("dump", "substrate", "heap_particles", "own_x")}
         row.update({"region_mm": label, "start_mm": region[0] * 1e3, "end_mm": region[1] * 1e3,
                     "length_mm": (region[1] - region[0]) * 1e3,
                     **{k: report[k] for k in METRICS}})
         row["mass_g"] *= area_ref / area
         row["fed_pct"] = 100 * fed_share(frame.atoms, layer["heap_particles"] + 1, region)
+        row["substrate_above_datum_um"] = 1e6 * (substrate_rms(substrate, region[:2])[0] - datum)
         rows.append(row)
     return rows
 
@@ -198,7 +203,8 @@ def main(argv=None) -> int:
     spans = {**{source: k.sampling_region[2:] for source, k in kept.items()}, "map": (y0, y1)}
     regions = {source: [(label, (*x, *y)) for label, x in regions.items()] for source, y in spans.items()}
     heap = {**{source: k.heap_particles for source, k in kept.items()}, "map": s.heap_particles}
-    found = [{**layer, "heap_particles": heap[layer["source"]]}
+    own_x = {**{source: k.sampling_region[:2] for source, k in kept.items()}, "map": (x0, x1)}
+    found = [{**layer, "heap_particles": heap[layer["source"]], "own_x": own_x[layer["source"]]}
              for layer in layers(args.replicates, args.map, args.variant, args.against)]
     if not found:
         parser.error(f"no layers found under --replicates {args.replicates} (variant {args.variant!r}) "
@@ -235,7 +241,9 @@ def main(argv=None) -> int:
                "reference's;\n" if args.against else "")
             +
             "- the CSV's `fed_pct`: per layer and region, the share of the particles over the region that the "
-            "feed added (ids above the settled heap's count).\n\n"
+            "feed added (ids above the settled heap's count); `substrate_above_datum_um`: the substrate's mean "
+            "height under the region above the gap's datum, its mean plane under the run's own region "
+            "(benchmarks/substrate_height.py reads it).\n\n"
             + table.to_markdown(index=False, floatfmt=".2f") + "\n")
     (args.out / f"{args.name}.md").write_text(text)
     print(text)

@@ -55,8 +55,7 @@ def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_
     none of it. Over the variant's strip, M_s per the level's region area is 1.2 / 2.5 of the lattice's
     areal mass (it covers that share of the strip), whatever the region's length. Its spheres past
     x = 6 mm carry ids above the variant's heap count: the feed's share of each region is theirs."""
-    import trimesh
-
+    from analysis.dem.geometry import height_field_mesh
     from analysis.metrics.dump import write_dump
     from benchmarks import bench_region
     r, rho = 50e-6, 4430.0
@@ -66,8 +65,9 @@ def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_
     ids = np.arange(1, x.size + 1) + np.where(x.ravel() > 6e-3, 100_000, 0)  # fed past x = 6 mm (heap: 7,580)
     atoms = pd.DataFrame({"id": ids, "x": x.ravel(), "y": y.ravel(), "z": r, "radius": r})
     write_dump(layer / "final.dump", atoms, [[-1e-3, 11e-3], [0.0, 2.5e-3], [-1e-3, 5e-3]])
-    trimesh.Trimesh([[-0.01, -0.01, 0], [0.02, -0.01, 0], [0.02, 0.01, 0], [-0.01, 0.01, 0]],
-                    [[0, 1, 2], [0, 2, 3]]).export(layer / "substrate.stl")
+    gx, gy = np.arange(-0.95e-3, 12e-3, 0.1e-3), np.linspace(-0.5e-3, 3e-3, 8)  # 0.1 mm facets
+    height_field_mesh(gx, gy, np.where(gx[:, None] > 6e-3, 30e-6, 0.0) + 0 * gy).export(
+        layer / "substrate.stl")  # 30 um higher past x = 6 mm (a ramp over 5.95-6.05 mm)
     assert bench_region.main(["--replicates", str(tmp_path / "kept"), "--level", "smoke",
                               "--variant", "E1e8+strip2.5+pile40", "--regions", "4.5-7.5", "--jobs", "1",
                               "--name", "wide", "--out", str(tmp_path)]) == 0
@@ -80,6 +80,11 @@ def test_a_wider_variants_kept_layer_is_measured_over_its_own_strip_and_per_the_
     # the feed's share: lattice columns at 6.05-6.45 of 4.55-6.45 mm, and 6.05-7.45 of 4.55-7.45 mm
     assert measured.loc["4.5-6.5", "fed_pct"] == pytest.approx(25.0)
     assert measured.loc["4.5-7.5", "fed_pct"] == pytest.approx(50.0)
+    # the gap's datum is the substrate's mean plane under the level's region, 4.5-6.5 mm: a quarter of it
+    # stands 30 um high, so the datum is 7.5 um up, and 4.5-7.5 mm (half of it high) 7.5 um above it
+    # (to a facet's half-width at the regions' ends)
+    assert measured.loc["4.5-6.5", "substrate_above_datum_um"] == pytest.approx(0.0, abs=1e-9)
+    assert measured.loc["4.5-7.5", "substrate_above_datum_um"] == pytest.approx(7.5, abs=1.0)
     with pytest.raises(SystemExit):
         bench_region.main(["--replicates", str(tmp_path / "kept"), "--variant", "strip9"])
     with pytest.raises(SystemExit):
@@ -107,3 +112,34 @@ def test_a_swapped_layer_is_said_to_follow_the_realisation_its_profile_is_nearer
         profile_swap.main([own, "--out", str(tmp_path)])
     with pytest.raises(SystemExit):
         profile_swap.main([own, swapped.replace("substrate+1", "substrate+2"), "--out", str(tmp_path)])
+
+
+def test_a_change_along_the_travel_is_split_into_the_substrates_height_and_the_rest(tmp_path):
+    """substrate_height: two layers (levels 5 and 7 mg) of six 1 mm bins whose M_s loses 0.02 mg per um
+    of substrate height and, past 9 mm, 0.3 mg more: the fit gives both back exactly, the far bins standing
+    9 um higher on average make the change as measured 0.18 mg larger; a table without heights is refused."""
+    from benchmarks import substrate_height
+    heights = {0: [0, -10, 5, 12, 8, 10], 1: [-5, 3, -4, 9, 1, 3]}
+    rows = []
+    for seed, level in ((0, 5.0), (1, 7.0)):
+        for i, h in enumerate(heights[seed]):
+            far = i >= 3
+            rows.append({"seed": seed, "U_mm_s": 70.0, "omega_rad_s": 0.0, "start_mm": 6.0 + i, "end_mm": 7.0 + i,
+                         "length_mm": 1.0, "substrate_above_datum_um": h,
+                         "mass_g": 1e-3 * (level - 0.02 * h - 0.3 * far)})
+    bins = pd.DataFrame(rows)
+    fit = substrate_height.fit_height(bins, (6.0, 9.0), (9.0, 12.0))
+    near = bins["mass_g"][bins["start_mm"] < 9].mean() * 1e3
+    mean = bins["mass_g"].mean() * 1e3
+    assert fit["mass_pct_per_um"] == pytest.approx(-100 * 0.02 / mean)
+    assert fit["far_pct"] == pytest.approx(-100 * 0.3 / near)
+    assert fit["far_height_um"] == pytest.approx((30 + 13) / 6 - (-5 - 6) / 6)  # 9 um
+    assert fit["far_raw_pct"] == pytest.approx(-100 * (0.3 + 0.02 * 9.0) / near)
+    assert fit["corr_within_layers"] < -0.9
+    assert (fit["layers"], fit["bins"]) == (2, 12)
+    bins.to_csv(tmp_path / "bins.csv", index=False)
+    assert substrate_height.main([f"default={tmp_path / 'bins.csv'}", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "substrate_height.csv").exists()
+    bins.drop(columns="substrate_above_datum_um").to_csv(tmp_path / "old.csv", index=False)
+    with pytest.raises(SystemExit):
+        substrate_height.main([f"default={tmp_path / 'old.csv'}", "--out", str(tmp_path)])
