@@ -181,6 +181,12 @@ VARIANTS = {
     "region6": {"LEVEL.sampling_length_mm": 6.0},
     "E1e8+strip2.5+pile40+region6": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE,
                                      "LEVEL.sampling_length_mm": 6.0},
+    # the 6-12 mm region with one of the reference's knobs at a time: past 9 mm the reference's layer thins and
+    # the default's does not (docs/scene_size.md: At the map's scene); which knob makes the difference?
+    "region6+E1e8": {"LEVEL.sampling_length_mm": 6.0, "LEVEL.youngs_modulus_dem_Pa": 1.0e8},
+    "region6+pile40": {"LEVEL.sampling_length_mm": 6.0, **PILE40},
+    "region6+strip2.5": {"LEVEL.sampling_length_mm": 6.0, "LEVEL.strip_width_mm": 2.5, **pile(20, 2.5)},
+    "region6+feed0.5": {"LEVEL.sampling_length_mm": 6.0, "LEVEL.feed_every_mm": 0.5},
     "E1e8+strip2.5+pile40+runout8": {"LEVEL.youngs_modulus_dem_Pa": 1.0e8, **BIG_SCENE, "LEVEL.run_out_mm": 8.0,
                                      "LEVEL.run_out_max_mm": 8.0},
     # the substrate of the next (previous) replicate under this replicate's heap and feed: run at seed 0
