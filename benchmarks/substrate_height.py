@@ -52,21 +52,26 @@ def fit_height(bins: pd.DataFrame, near: tuple[float, float], far: tuple[float, 
     standard error, ``far_raw_pct`` (as measured), ``far_height_um`` (the far bins' mean height above the
     near ones'), the correlation of M_s with height within the layers, and the counts.
     """
-    inside = lambda lo, hi: (bins["start_mm"] >= lo - 1e-9) & (bins["end_mm"] <= hi + 1e-9)  # noqa: E731
-    is_near, is_far = inside(*near), inside(*far)
+    is_near = (bins["start_mm"] >= near[0] - 1e-9) & (bins["end_mm"] <= near[1] + 1e-9)
+    is_far = (bins["start_mm"] >= far[0] - 1e-9) & (bins["end_mm"] <= far[1] + 1e-9)
     used = bins[is_near | is_far]
     is_far = is_far[is_near | is_far].to_numpy(float)
     mass = 1e3 * used["mass_g"].to_numpy()  # mg
     height = used["substrate_above_datum_um"].to_numpy()
     layer = used[["U_mm_s", "seed"]].astype(str).agg("_".join, axis=1).to_numpy()  # a map's runs share a seed
-    design = np.column_stack([pd.get_dummies(layer).to_numpy(float), height] + ([is_far] if is_far.any() else []))
+    levels = pd.get_dummies(layer).to_numpy(float)
+    k = levels.shape[1]  # the height's column
+    design = np.column_stack([levels, height] + ([is_far] if is_far.any() else []))
     coef, *_ = np.linalg.lstsq(design, mass, rcond=None)
     dof = len(mass) - design.shape[1]
     sigma2 = float(np.sum((mass - design @ coef) ** 2) / dof) if dof > 0 else np.nan
     se = np.sqrt(np.diag(sigma2 * np.linalg.pinv(design.T @ design)))
-    near_mean, mean, k = mass[is_far == 0].mean(), mass.mean(), design.shape[1] - 1 - is_far.any()
-    centred = lambda v: v - pd.Series(v).groupby(layer).transform("mean").to_numpy()  # noqa: E731
-    fit = {"layers": len(set(layer)), "bins": len(mass),
+    near_mean, mean = mass[is_far == 0].mean(), mass.mean()
+
+    def centred(v):  # each layer's mean removed
+        return v - pd.Series(v).groupby(layer).transform("mean").to_numpy()
+
+    fit = {"layers": k, "bins": len(mass),
            "mass_pct_per_um": 100 * coef[k] / mean, "mass_pct_per_um_se": 100 * se[k] / mean,
            "corr_within_layers": float(np.corrcoef(centred(height), centred(mass))[0, 1]),
            "far_height_um": np.nan, "far_raw_pct": np.nan, "far_pct": np.nan, "far_pct_se": np.nan}
@@ -87,7 +92,10 @@ def main(argv=None) -> int:
     parser.add_argument("--name", default="substrate_height")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "measured")
     args = parser.parse_args(argv)
-    near, far = span(args.near), ((np.inf, np.inf) if args.far == "none" else span(args.far))
+    try:
+        near, far = span(args.near), ((np.inf, np.inf) if args.far == "none" else span(args.far))
+    except ValueError:
+        parser.error(f"--near {args.near!r} / --far {args.far!r}: want start-end in mm (e.g. 9-12), or --far none")
     rows = []
     for item in args.tables:
         name, sep, path = item.partition("=")
@@ -112,8 +120,9 @@ def main(argv=None) -> int:
     text = (f"# The layer's mass against the substrate's height under it\n\n"
             f"Fitted {time.strftime('%Y-%m-%d')} on {platform.machine()}, {platform.node()} (no DEM), by\n"
             f"`.venv/bin/python benchmarks/substrate_height.py {command}`.\n\n"
-            f"Per scene and omega, the {args.bin_mm:g} mm bins inside {args.near} mm (near) and {args.far} mm (far) "
-            "of every layer: M_s(bin) = a_layer + b height(bin) + c [far].\n\n"
+            f"Per scene and omega, the {args.bin_mm:g} mm bins inside {args.near} mm (near) and "
+            + ("no far bins" if args.far == "none" else f"{args.far} mm (far)")
+            + " of every layer: M_s(bin) = a_layer + b height(bin) + c [far].\n\n"
             "- `mass_pct_per_um`: b, % of the mean M_s per um of the substrate's mean height above the gap's "
             "datum (with its standard error);\n"
             "- `corr_within_layers`: the correlation of a bin's M_s with its height, each layer's means removed;\n"

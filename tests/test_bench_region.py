@@ -143,3 +143,5 @@ def test_a_change_along_the_travel_is_split_into_the_substrates_height_and_the_r
     bins.drop(columns="substrate_above_datum_um").to_csv(tmp_path / "old.csv", index=False)
     with pytest.raises(SystemExit):
         substrate_height.main([f"default={tmp_path / 'old.csv'}", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit):
+        substrate_height.main([f"default={tmp_path / 'bins.csv'}", "--far", "9", "--out", str(tmp_path)])
